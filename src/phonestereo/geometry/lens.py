@@ -1,0 +1,382 @@
+"""Lens distortion models on normalised image coordinates (thesis §1.1.1, §3.2).
+
+A lens model maps ideal normalised coordinates ``(x, y) = (X/Z, Y/Z)`` to distorted normalised
+coordinates ``(x_d, y_d)``; the camera matrix K then maps those to pixels. Every model shares
+the OpenCV tangential terms and differs in its radial factor ``g``::
+
+    x_d = x·g + 2·p1·x·y + p2·(r² + 2x²)
+    y_d = y·g + p1·(r² + 2y²) + 2·p2·x·y
+
+Models
+------
+``opencv5``   g = 1 + k1 r² + k2 r⁴ + k3 r⁶                      coefficients (k1, k2, p1, p2, k3)
+``opencv8``   g = (1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)
+              coefficients (k1, k2, p1, p2, k3, k4, k5, k6)  — OpenCV's order, so they round-trip
+``radial-odd`` g = 1 + Σᵢ kᵢ rⁱ, i = 1..n, odd degrees included (thesis §3.2 fix 1)
+              coefficients (k1, …, kn, p1, p2)
+
+Undistortion is Newton's method with the analytic Jacobian; it converges to |distort(u) − x_d|
+≤ 1e-12 (normalised units, ≈ 2e-9 px at f = 1500 px) inside the valid field, the region where
+the model is one-to-one (det J > 0). Points outside it, or that do not converge, come back NaN.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.geometry._checks import Array, as_points
+
+UNDISTORT_TOL = 1e-12
+
+
+@dataclass(frozen=True)
+class LensModel(ABC):
+    """Base class: a distortion model with a flat coefficient vector in its documented order.
+
+    Parameters
+    ----------
+    coefficients : tuple of float
+        Model coefficients in the order of the model's docstring.
+    """
+
+    coefficients: tuple[float, ...]
+    name: ClassVar[str] = ""
+
+    def __post_init__(self) -> None:
+        coeffs = tuple(float(c) for c in self.coefficients)
+        if not all(np.isfinite(coeffs)):
+            raise InputError(f"lens '{self.name}' coefficients must be finite, got {coeffs}")
+        self._check_count(len(coeffs))
+        object.__setattr__(self, "coefficients", coeffs)
+
+    # --- model-specific parts -------------------------------------------------------------
+    @abstractmethod
+    def _check_count(self, n: int) -> None: ...
+
+    @abstractmethod
+    def _tangential(self) -> tuple[float, float]: ...
+
+    @abstractmethod
+    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
+        """Return g, dg/d(r²)·(r² ≠ 0 safe form is handled by callers), dg/dcoeff (…, n)."""
+
+    @abstractmethod
+    def _tangential_columns(self) -> tuple[int, int]:
+        """Indices of p1 and p2 in the coefficient vector."""
+
+    # --- shared API -----------------------------------------------------------------------
+    @property
+    def n_coefficients(self) -> int:
+        """Number of coefficients of this model."""
+        return len(self.coefficients)
+
+    def is_identity(self) -> bool:
+        """True when every coefficient is zero (a pinhole lens)."""
+        return not any(self.coefficients)
+
+    def with_coefficients(self, coefficients: Any) -> LensModel:
+        """Return the same model with new coefficients."""
+        return type(self)(tuple(float(c) for c in np.ravel(coefficients)))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready ``{"model": name, "coefficients": [...]}``."""
+        return {"model": self.name, "coefficients": list(self.coefficients)}
+
+    def distort(self, xy: Any) -> Array:
+        """Distort ideal normalised coordinates.
+
+        Parameters
+        ----------
+        xy : array_like, shape (..., 2)
+            Ideal normalised coordinates (X/Z, Y/Z), unitless.
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+            Distorted normalised coordinates.
+
+        Examples
+        --------
+        >>> lens = OpenCV5((0.1, 0.0, 0.0, 0.0, 0.0))
+        >>> lens.distort([0.5, 0.0]).round(6).tolist()   # 0.5·(1 + 0.1·0.25)
+        [0.5125, 0.0]
+        """
+        p = as_points(xy, 2, "xy")
+        x, y = p[..., 0], p[..., 1]
+        r2: Array = np.asarray(x * x + y * y, dtype=np.float64)
+        g, _, _ = self._radial(r2)
+        p1, p2 = self._tangential()
+        xd = x * g + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * g + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.stack([xd, yd], axis=-1)
+
+    def jacobian_point(self, xy: Any) -> Array:
+        """Jacobian of :meth:`distort` with respect to the point.
+
+        Returns
+        -------
+        ndarray, shape (..., 2, 2)
+            ``J[..., i, j] = d xd_i / d x_j``.
+        """
+        p = as_points(xy, 2, "xy")
+        x, y = p[..., 0], p[..., 1]
+        r2: Array = np.asarray(x * x + y * y, dtype=np.float64)
+        g, dg_dr2, _ = self._radial(r2)
+        p1, p2 = self._tangential()
+        # x²·g' and x·y·g' written so that models with an r¹ term stay finite at r = 0.
+        xx = np.where(r2 > 0, x * x * dg_dr2, 0.0)
+        xy_ = np.where(r2 > 0, x * y * dg_dr2, 0.0)
+        yy = np.where(r2 > 0, y * y * dg_dr2, 0.0)
+        j = np.empty((*x.shape, 2, 2))
+        j[..., 0, 0] = g + 2 * xx + 2 * p1 * y + 6 * p2 * x
+        j[..., 0, 1] = 2 * xy_ + 2 * p1 * x + 2 * p2 * y
+        j[..., 1, 0] = 2 * xy_ + 2 * p1 * x + 2 * p2 * y
+        j[..., 1, 1] = g + 2 * yy + 6 * p1 * y + 2 * p2 * x
+        return j
+
+    def jacobian_coefficients(self, xy: Any) -> Array:
+        """Jacobian of :meth:`distort` with respect to the coefficients.
+
+        Returns
+        -------
+        ndarray, shape (..., 2, n_coefficients)
+        """
+        p = as_points(xy, 2, "xy")
+        x, y = p[..., 0], p[..., 1]
+        r2: Array = np.asarray(x * x + y * y, dtype=np.float64)
+        _, _, dg_dc = self._radial(r2)
+        j = np.empty((*x.shape, 2, self.n_coefficients))
+        j[..., 0, :] = x[..., None] * dg_dc
+        j[..., 1, :] = y[..., None] * dg_dc
+        i1, i2 = self._tangential_columns()
+        j[..., 0, i1] = 2 * x * y
+        j[..., 0, i2] = r2 + 2 * x * x
+        j[..., 1, i1] = r2 + 2 * y * y
+        j[..., 1, i2] = 2 * x * y
+        return j
+
+    def undistort(self, xy_d: Any, *, tol: float = UNDISTORT_TOL, max_iter: int = 50) -> Array:
+        """Invert :meth:`distort` by damped Newton iterations.
+
+        Parameters
+        ----------
+        xy_d : array_like, shape (..., 2)
+            Distorted normalised coordinates.
+        tol : float
+            Convergence threshold on |distort(u) − xy_d| (max norm, normalised units).
+        max_iter : int
+            Iteration cap.
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+            Ideal normalised coordinates; NaN where the point lies outside the valid field or
+            did not converge to ``tol``.
+
+        Examples
+        --------
+        >>> lens = OpenCV5((-0.2, 0.05, 1e-3, -5e-4, 0.0))
+        >>> u = lens.undistort(lens.distort([0.3, -0.2]))
+        >>> bool(np.allclose(u, [0.3, -0.2], atol=1e-12))
+        True
+        """
+        target = as_points(xy_d, 2, "xy_d")
+        if self.is_identity():
+            return target.copy()
+        shape = target.shape
+        t = target.reshape(-1, 2)
+        u = t.copy()
+        res = self.distort(u) - t
+        err = np.max(np.abs(res), axis=-1)
+        active = np.isfinite(err) & (err > tol)
+        for _ in range(max_iter):
+            if not np.any(active):
+                break
+            ua, ra = u[active], res[active]
+            j = self.jacobian_point(ua)
+            det = j[..., 0, 0] * j[..., 1, 1] - j[..., 0, 1] * j[..., 1, 0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dx = (j[..., 1, 1] * ra[:, 0] - j[..., 0, 1] * ra[:, 1]) / det
+                dy = (-j[..., 1, 0] * ra[:, 0] + j[..., 0, 0] * ra[:, 1]) / det
+            step = np.stack([dx, dy], axis=-1)
+            ea = err[active]
+            # Damping: halve the step until the residual does not grow (at most 8 times).
+            new_u = ua - step
+            new_r = self.distort(new_u) - t[active]
+            new_e = np.max(np.abs(new_r), axis=-1)
+            for _ in range(8):
+                worse = ~(new_e <= ea)
+                if not np.any(worse):
+                    break
+                step[worse] *= 0.5
+                new_u[worse] = ua[worse] - step[worse]
+                new_r[worse] = self.distort(new_u[worse]) - t[active][worse]
+                new_e[worse] = np.max(np.abs(new_r[worse]), axis=-1)
+            idx = np.flatnonzero(active)
+            improved = new_e <= ea
+            u[idx[improved]] = new_u[improved]
+            res[idx[improved]] = new_r[improved]
+            err[idx[improved]] = new_e[improved]
+            still = improved & (new_e > tol)
+            active[idx] = still
+        ok = err <= tol
+        # Outside the valid field the model folds over: reject where det J <= 0.
+        jf = self.jacobian_point(u)
+        detf = jf[..., 0, 0] * jf[..., 1, 1] - jf[..., 0, 1] * jf[..., 1, 0]
+        ok &= detf > 0
+        u[~ok] = np.nan
+        return u.reshape(shape)
+
+
+def _powers(r2: Array, exps: tuple[int, ...]) -> list[Array]:
+    return [r2**e for e in exps]
+
+
+@dataclass(frozen=True)
+class OpenCV5(LensModel):
+    """OpenCV's 5-coefficient Brown–Conrady model (k1, k2, p1, p2, k3)."""
+
+    name: ClassVar[str] = "opencv5"
+
+    def _check_count(self, n: int) -> None:
+        if n != 5:
+            raise InputError(f"lens 'opencv5' takes 5 coefficients (k1, k2, p1, p2, k3), got {n}")
+
+    def _tangential(self) -> tuple[float, float]:
+        return self.coefficients[2], self.coefficients[3]
+
+    def _tangential_columns(self) -> tuple[int, int]:
+        return 2, 3
+
+    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
+        k1, k2, _, _, k3 = self.coefficients
+        r4, r6 = r2 * r2, r2 * r2 * r2
+        g = 1 + k1 * r2 + k2 * r4 + k3 * r6
+        dg = k1 + 2 * k2 * r2 + 3 * k3 * r4
+        dc = np.zeros((*r2.shape, 5))
+        dc[..., 0], dc[..., 1], dc[..., 4] = r2, r4, r6
+        return g, dg, dc
+
+
+@dataclass(frozen=True)
+class OpenCV8(LensModel):
+    """OpenCV's 8-coefficient rational model (k1, k2, p1, p2, k3, k4, k5, k6)."""
+
+    name: ClassVar[str] = "opencv8"
+
+    def _check_count(self, n: int) -> None:
+        if n != 8:
+            raise InputError(
+                f"lens 'opencv8' takes 8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6), got {n}"
+            )
+
+    def _tangential(self) -> tuple[float, float]:
+        return self.coefficients[2], self.coefficients[3]
+
+    def _tangential_columns(self) -> tuple[int, int]:
+        return 2, 3
+
+    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
+        k1, k2, _, _, k3, k4, k5, k6 = self.coefficients
+        r4, r6 = r2 * r2, r2 * r2 * r2
+        num = 1 + k1 * r2 + k2 * r4 + k3 * r6
+        den = 1 + k4 * r2 + k5 * r4 + k6 * r6
+        dnum = k1 + 2 * k2 * r2 + 3 * k3 * r4
+        dden = k4 + 2 * k5 * r2 + 3 * k6 * r4
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = num / den
+            dg = (dnum * den - num * dden) / (den * den)
+            dc = np.zeros((*r2.shape, 8))
+            dc[..., 0], dc[..., 1], dc[..., 4] = r2 / den, r4 / den, r6 / den
+            q = -num / (den * den)
+            dc[..., 5], dc[..., 6], dc[..., 7] = q * r2, q * r4, q * r6
+        return g, dg, dc
+
+
+@dataclass(frozen=True)
+class RadialOdd(LensModel):
+    """Radial polynomial with every degree, odd ones included (thesis §3.2 fix 1).
+
+    ``g = 1 + Σᵢ kᵢ rⁱ`` for i = 1..n, then the OpenCV tangential terms; coefficients
+    ``(k1, …, kn, p1, p2)`` with 1 ≤ n ≤ 10.
+    """
+
+    name: ClassVar[str] = "radial-odd"
+
+    def _check_count(self, n: int) -> None:
+        if not 3 <= n <= 12:
+            raise InputError(
+                "lens 'radial-odd' takes (k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms, "
+                f"got {n} coefficients"
+            )
+
+    @property
+    def n_radial(self) -> int:
+        """Number of radial terms n."""
+        return self.n_coefficients - 2
+
+    def _tangential(self) -> tuple[float, float]:
+        return self.coefficients[-2], self.coefficients[-1]
+
+    def _tangential_columns(self) -> tuple[int, int]:
+        return self.n_coefficients - 2, self.n_coefficients - 1
+
+    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
+        r = np.sqrt(r2)
+        ks = self.coefficients[:-2]
+        g = np.ones_like(r2)
+        dg = np.zeros_like(r2)
+        dc = np.zeros((*r2.shape, self.n_coefficients))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for i, k in enumerate(ks, start=1):
+                ri = r**i
+                g = g + k * ri
+                dc[..., i - 1] = ri
+                # dg/d(r²) = Σ i·k·r^(i−2) / 2; r = 0 is handled by callers via x²·g'.
+                dg = dg + 0.5 * i * k * r ** (i - 2)
+        return g, dg, dc
+
+
+LENS_MODELS: dict[str, type[LensModel]] = {
+    OpenCV5.name: OpenCV5,
+    OpenCV8.name: OpenCV8,
+    RadialOdd.name: RadialOdd,
+}
+
+
+def make_lens(name: str, coefficients: Any | None = None, *, n_radial: int = 6) -> LensModel:
+    """Build a lens model by name; zero coefficients (a pinhole lens) when none are given.
+
+    Parameters
+    ----------
+    name : {"opencv5", "opencv8", "radial-odd"}
+    coefficients : array_like, optional
+        Coefficients in the model's order.
+    n_radial : int
+        Number of radial terms for ``radial-odd`` when ``coefficients`` is omitted.
+
+    Raises
+    ------
+    InputError
+        Unknown model name or wrong coefficient count.
+    """
+    if name not in LENS_MODELS:
+        raise InputError(f"unknown lens model '{name}'; choose one of {sorted(LENS_MODELS)}")
+    cls = LENS_MODELS[name]
+    if coefficients is None:
+        n = {"opencv5": 5, "opencv8": 8}.get(name, n_radial + 2)
+        coefficients = (0.0,) * n
+    return cls(tuple(float(c) for c in np.ravel(np.asarray(coefficients, dtype=float))))
+
+
+def lens_from_dict(data: dict[str, Any]) -> LensModel:
+    """Inverse of :meth:`LensModel.to_dict`."""
+    try:
+        return make_lens(str(data["model"]), data["coefficients"])
+    except KeyError as exc:
+        raise InputError(f"lens entry needs 'model' and 'coefficients', missing {exc}") from exc
