@@ -1,4 +1,4 @@
-"""The ``phonestereo`` command line: one Typer app, each command a thin wrapper over a library call."""
+"""The one Typer app; command modules in this package register on it."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ app = typer.Typer(
     help="Metric depth from a phone's wide + tele stereo cameras (calibrate, simulate, measure).",
     no_args_is_help=True,
     add_completion=False,
+    pretty_exceptions_show_locals=False,
 )
 
 
@@ -26,12 +27,3 @@ def _root() -> None:
 def version() -> None:
     """Print the phonestereo version."""
     typer.echo(__version__)
-
-
-def main() -> None:
-    """Console-script entry point."""
-    app()
-
-
-if __name__ == "__main__":
-    main()

@@ -1,0 +1,16 @@
+"""The ``phonestereo`` command line: one Typer app, each command a thin wrapper over a library call.
+
+Each sub-module registers its commands on :data:`phonestereo.cli.app.app`; importing them here
+builds the whole app.
+"""
+
+from __future__ import annotations
+
+from phonestereo.cli.app import app
+
+__all__ = ["app", "main"]
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()
