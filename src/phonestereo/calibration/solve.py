@@ -363,3 +363,11 @@ def calibrate_stereo(
     x, inliers, rounds = _solve(layout, obs, x0, options)
     del cam_w, cam_t, poses_w, poses_t
     return _finish(layout, obs, x, inliers, rounds, t0)
+
+
+def intrinsic_extrinsic_covariance(result: CalibrationResult) -> tuple[tuple[str, ...], np.ndarray]:
+    """The covariance block of camera and rig parameters (board poses dropped), for files."""
+    keep = [i for i, n in enumerate(result.parameter_names) if not n.startswith("view")]
+    names = tuple(result.parameter_names[i] for i in keep)
+    cov = result.covariance[np.ix_(keep, keep)]
+    return names, 0.5 * (cov + cov.T)

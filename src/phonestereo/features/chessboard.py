@@ -1,0 +1,133 @@
+"""Plain chessboard detection: OpenCV finds and orders the board, the saddle fit refines it.
+
+Used for multi-pose calibration boards such as OpenCV's sample set (thesis §1.3.2). The
+verification chart with circle pairs has its own detector; both share :func:`refine_saddle`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.features.saddle import refine_saddle
+
+
+@dataclass(frozen=True, eq=False)
+class ChessboardDetection:
+    """Corners of a plain chessboard, or the reason there are none.
+
+    Attributes
+    ----------
+    found : bool
+    reason : str
+        Empty when found; otherwise what went wrong, for the user.
+    points : ndarray, shape (N, 2)
+        Refined corners, row-major (id = row·cols + col) like OpenCV's object points.
+    ids : ndarray of int, shape (N,)
+    quality : ndarray, shape (N,)
+        Saddle strength per corner (intensity / px²).
+    """
+
+    found: bool
+    reason: str
+    points: np.ndarray
+    ids: np.ndarray
+    quality: np.ndarray
+
+
+def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDetection:
+    """Find a plain chessboard of ``pattern = (cols, rows)`` inner corners, refined to sub-pixel.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W), uint8
+        Grayscale image.
+    pattern : (int, int)
+        Inner corners per row and per column (OpenCV's patternSize).
+
+    Returns
+    -------
+    ChessboardDetection
+        ``found=False`` with a reason when the board is not there (not an exception).
+    """
+    cols, rows = pattern
+    if cols < 2 or rows < 2:
+        raise InputError(f"board must have at least 2x2 inner corners, got {cols}x{rows}")
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    ok, corners = cv2.findChessboardCorners(image, (cols, rows), flags=flags)
+    empty = np.zeros((0, 2))
+    if not ok or corners is None:
+        return ChessboardDetection(
+            False,
+            f"no complete {cols}x{rows} inner-corner chessboard found",
+            empty,
+            np.zeros(0, np.int64),
+            np.zeros(0),
+        )
+    start = corners.reshape(-1, 2).astype(np.float64)
+    # Window: 0.35 of the smallest corner spacing keeps neighbours out of the fit.
+    grid = start.reshape(rows, cols, 2)
+    spacing = min(
+        float(np.min(np.linalg.norm(np.diff(grid, axis=1), axis=2))),
+        float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
+    )
+    radius = float(np.clip(0.35 * spacing, 2.0, 6.0))
+    res = refine_saddle(image, start, radius_px=radius, blur_sigma_px=min(1.5, radius / 3))
+    larger = _extends_beyond(image, res.points.reshape(rows, cols, 2), res.saddle_strength, radius)
+    if larger:
+        return ChessboardDetection(
+            False,
+            f"the board has more inner corners than {cols}x{rows} (it continues past the "
+            f"{larger} edge); check --board (inner corners COLSxROWS)",
+            res.points,
+            np.arange(cols * rows),
+            res.saddle_strength,
+        )
+    keep = res.ok
+    bad = int(np.count_nonzero(~keep))
+    ids = np.arange(cols * rows)
+    if bad > keep.size // 2:
+        return ChessboardDetection(
+            False,
+            f"{bad} of {keep.size} corners are not clean saddles (blur, glare, occlusion)",
+            res.points,
+            ids,
+            res.saddle_strength,
+        )
+    note = f"{bad} corner(s) dropped: not clean saddles" if bad else ""
+    return ChessboardDetection(True, note, res.points[keep], ids[keep], res.saddle_strength[keep])
+
+
+def _extends_beyond(
+    image: np.ndarray, grid: np.ndarray, strength: np.ndarray, radius: float
+) -> str:
+    """Name a side past which the chessboard continues (a sub-board was found), or ''.
+
+    OpenCV's detector happily returns an 8×6 sub-board of a 9×6 board. One grid step beyond
+    each side, a real board edge has no saddles; a larger board has a full row of them.
+    """
+    sides = {
+        "top": 2 * grid[0] - grid[1],
+        "bottom": 2 * grid[-1] - grid[-2],
+        "left": 2 * grid[:, 0] - grid[:, 1],
+        "right": 2 * grid[:, -1] - grid[:, -2],
+    }
+    h, w = image.shape[:2]
+    typical = float(np.median(strength))
+    for name, pts in sides.items():
+        inside = (
+            (pts[:, 0] > radius)
+            & (pts[:, 1] > radius)
+            & (pts[:, 0] < w - 1 - radius)
+            & (pts[:, 1] < h - 1 - radius)
+        )
+        if inside.sum() < 2:
+            continue
+        r = refine_saddle(image, pts[inside], radius_px=radius, blur_sigma_px=min(1.5, radius / 3))
+        strong = r.ok & (r.saddle_strength > 0.3 * typical)
+        if strong.mean() >= 0.8:
+            return name
+    return ""

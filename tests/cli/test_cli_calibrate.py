@@ -1,0 +1,93 @@
+"""`phonestereo calibrate` on the OpenCV stereo sample, and its clear errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import pytest
+from typer.testing import CliRunner
+
+from phonestereo.cli import app
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "opencv_stereo"
+pytestmark = pytest.mark.skipif(not DATA.exists(), reason="shared/data not beside the clone")
+
+
+def _run(*args: str) -> tuple[int, str]:
+    res = CliRunner().invoke(app, list(args))
+    return res.exit_code, res.output
+
+
+def test_stereo_calibration_json(tmp_path: Path) -> None:
+    code, out = _run(
+        "calibrate",
+        "--board",
+        "9x6",
+        "--square-m",
+        "1",
+        "--wide",
+        str(DATA / "left*.jpg"),
+        "--tele",
+        str(DATA / "right*.jpg"),
+        "--out",
+        str(tmp_path / "calibration.json"),
+        "--json",
+    )
+    assert code == 0, out
+    summary = json.loads(out.strip().splitlines()[-1])
+    # Issue #3: with outlier rejection ≤ 0.14 px per coordinate (mrcal 0.129 px, 2.4 % out).
+    assert summary["rms_px_per_coordinate"] <= 0.14
+    assert summary["outliers"] / summary["points"] < 0.03
+    assert abs(abs(summary["T_tele_wide"]["t"][0]) - 3.33) < 0.05  # square units
+    saved = json.loads((tmp_path / "calibration.json").read_text())
+    assert saved["rms_px"] == pytest.approx(summary["rms_px_per_point"])
+
+
+def test_wrong_board_size_names_the_fix(tmp_path: Path) -> None:
+    code, out = _run(
+        "calibrate",
+        "--board",
+        "8x6",
+        "--square-m",
+        "1",
+        "--wide",
+        str(DATA / "left*.jpg"),
+        "--out",
+        str(tmp_path / "c.json"),
+    )
+    assert code == 2
+    assert "more inner corners than 8x6" in out.replace("\n", " ")
+
+
+def test_empty_glob_and_mixed_sizes(tmp_path: Path) -> None:
+    code, out = _run(
+        "calibrate",
+        "--board",
+        "9x6",
+        "--square-m",
+        "1",
+        "--wide",
+        str(tmp_path / "none*.jpg"),
+        "--out",
+        str(tmp_path / "c.json"),
+    )
+    assert code == 2 and "no wide images match" in out
+    for name in ("left01.jpg", "left02.jpg"):
+        shutil.copy(DATA / name, tmp_path / name)
+    small = cv2.resize(cv2.imread(str(DATA / "left03.jpg")), (320, 240))
+    cv2.imwrite(str(tmp_path / "left03.jpg"), small)
+    code, out = _run(
+        "calibrate",
+        "--board",
+        "9x6",
+        "--square-m",
+        "1",
+        "--wide",
+        str(tmp_path / "left*.jpg"),
+        "--out",
+        str(tmp_path / "c.json"),
+    )
+    assert code == 2 and "must share a size" in out.replace("\n", " ")
