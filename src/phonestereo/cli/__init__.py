@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401  (registers commands)
 from phonestereo.cli import charts as _charts  # noqa: F401
+from phonestereo.cli import io_commands as _io  # noqa: F401
 from phonestereo.cli.app import app
 
 __all__ = ["app", "main"]

@@ -16,14 +16,19 @@ Models
               coefficients (k1, …, kn, p1, p2)
 
 Undistortion is Newton's method with the analytic Jacobian; it converges to |distort(u) − x_d|
-≤ 1e-12 (normalised units, ≈ 2e-9 px at f = 1500 px) inside the valid field, the region where
-the model is one-to-one (det J > 0). Points outside it, or that do not converge, come back NaN.
+≤ 1e-12 (normalised units) and then takes one more Newton step, so the result is at rounding
+level (≈ 1e-16, far below 1e-9 px at f = 4500 px) inside the valid field. The valid field is the
+disc |u| < :attr:`LensModel.valid_radius` around the centre, where the model is one-to-one:
+det J > 0 and the radial map increasing along every direction from the centre. Points outside
+it (including solutions on the folded-over branch beyond it), or that do not converge, come
+back NaN.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, ClassVar
 
 import numpy as np
@@ -32,6 +37,7 @@ from phonestereo.errors import InputError
 from phonestereo.geometry._checks import Array, as_points
 
 UNDISTORT_TOL = 1e-12
+VALID_RADIUS_MAX = 20.0  # normalised radius scanned for the valid field (87° off axis)
 
 
 @dataclass(frozen=True)
@@ -82,6 +88,38 @@ class LensModel(ABC):
     def with_coefficients(self, coefficients: Any) -> LensModel:
         """Return the same model with new coefficients."""
         return type(self)(tuple(float(c) for c in np.ravel(coefficients)))
+
+    @cached_property
+    def valid_radius(self) -> float:
+        """Radius of the valid field in normalised units (computed once per lens).
+
+        The last radius before det J ≤ 0 or |distort(u)| stops increasing, scanned along 16
+        directions (step 2e-3 to r = 4, 2e-2 to r = 20); :data:`VALID_RADIUS_MAX` if no fold.
+
+        Examples
+        --------
+        >>> round(OpenCV5((-0.1, 0.0, 0.0, 0.0, 0.0)).valid_radius, 2)   # 1/sqrt(3·0.1)
+        1.82
+        """
+        return self._field[0]
+
+    @cached_property
+    def _field(self) -> tuple[float, Array, Array]:
+        """(valid radius, r grid, radial-only distorted radius r·g(r²)) on [0, valid radius]."""
+        r = np.concatenate([np.arange(0, 2001) * 2e-3, 4.0 + np.arange(1, 801) * 2e-2])
+        ang = np.arange(16) * (np.pi / 8)
+        pts = r[1:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=-1)[None]
+        with np.errstate(all="ignore"):
+            good = _det(self.jacobian_point(pts)) > 0
+            good[1:] &= np.diff(np.linalg.norm(self.distort(pts), axis=-1), axis=0) > 0
+            rd = r * self._radial(r * r)[0]
+        bad = np.flatnonzero(~np.all(good, axis=1))
+        n = bad[0] + 1 if bad.size else r.size  # r[n - 1] is the last good radius
+        # The radial-only map seeds Newton; keep its increasing part (tangential terms aside).
+        inc = np.flatnonzero(~(np.diff(rd[:n]) > 0))
+        m = inc[0] + 1 if inc.size else n
+        radius = float(r[n - 1]) if bad.size else VALID_RADIUS_MAX
+        return radius, r[:m].copy(), rd[:m].copy()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready ``{"model": name, "coefficients": [...]}``."""
@@ -190,47 +228,63 @@ class LensModel(ABC):
             return target.copy()
         shape = target.shape
         t = target.reshape(-1, 2)
-        u = t.copy()
-        res = self.distort(u) - t
-        err = np.max(np.abs(res), axis=-1)
-        active = np.isfinite(err) & (err > tol)
-        for _ in range(max_iter):
-            if not np.any(active):
-                break
-            ua, ra = u[active], res[active]
-            j = self.jacobian_point(ua)
-            det = j[..., 0, 0] * j[..., 1, 1] - j[..., 0, 1] * j[..., 1, 0]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                dx = (j[..., 1, 1] * ra[:, 0] - j[..., 0, 1] * ra[:, 1]) / det
-                dy = (-j[..., 1, 0] * ra[:, 0] + j[..., 0, 0] * ra[:, 1]) / det
-            step = np.stack([dx, dy], axis=-1)
-            ea = err[active]
-            # Damping: halve the step until the residual does not grow (at most 8 times).
-            new_u = ua - step
-            new_r = self.distort(new_u) - t[active]
-            new_e = np.max(np.abs(new_r), axis=-1)
-            for _ in range(8):
-                worse = ~(new_e <= ea)
-                if not np.any(worse):
+        # Start from the inverse of the radial-only map (a 1-D table), so Newton starts on the
+        # principal branch anywhere in the valid field, even near the fold.
+        _, r_tab, rd_tab = self._field
+        rd = np.hypot(t[:, 0], t[:, 1])
+        # Far outside the field Newton may diverge to overflow; those points end up NaN.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            u: Array = t * np.where(rd > 0, np.interp(rd, rd_tab, r_tab) / rd, 1.0)[:, None]
+            res = self.distort(u) - t
+            err = np.max(np.abs(res), axis=-1)
+            active = np.isfinite(err) & (err > tol)
+            for _ in range(max_iter):
+                if not np.any(active):
                     break
-                step[worse] *= 0.5
-                new_u[worse] = ua[worse] - step[worse]
-                new_r[worse] = self.distort(new_u[worse]) - t[active][worse]
-                new_e[worse] = np.max(np.abs(new_r[worse]), axis=-1)
-            idx = np.flatnonzero(active)
-            improved = new_e <= ea
-            u[idx[improved]] = new_u[improved]
-            res[idx[improved]] = new_r[improved]
-            err[idx[improved]] = new_e[improved]
-            still = improved & (new_e > tol)
-            active[idx] = still
-        ok = err <= tol
-        # Outside the valid field the model folds over: reject where det J <= 0.
-        jf = self.jacobian_point(u)
-        detf = jf[..., 0, 0] * jf[..., 1, 1] - jf[..., 0, 1] * jf[..., 1, 0]
-        ok &= detf > 0
+                ua, ta, ea = u[active], t[active], err[active]
+                step = _solve2(self.jacobian_point(ua), res[active])
+                # Damping: halve the step until the residual does not grow (at most 8 times).
+                new_u = ua - step
+                new_r = self.distort(new_u) - ta
+                new_e = np.max(np.abs(new_r), axis=-1)
+                for _ in range(8):
+                    worse = ~(new_e <= ea)
+                    if not np.any(worse):
+                        break
+                    step[worse] *= 0.5
+                    new_u[worse] = ua[worse] - step[worse]
+                    new_r[worse] = self.distort(new_u[worse]) - ta[worse]
+                    new_e[worse] = np.max(np.abs(new_r[worse]), axis=-1)
+                idx = np.flatnonzero(active)
+                improved = new_e <= ea
+                u[idx[improved]] = new_u[improved]
+                res[idx[improved]] = new_r[improved]
+                err[idx[improved]] = new_e[improved]
+                active[idx] = improved & (new_e > tol)
+            # Outside the valid field the model folds over: reject det J <= 0 and solutions
+            # beyond the valid radius (the folded branch can have det J > 0 again, g < 0).
+            j = self.jacobian_point(u)
+            ok = (err <= tol) & (_det(j) > 0) & (np.hypot(u[:, 0], u[:, 1]) < self.valid_radius)
+            # One polishing Newton step on converged points takes the residual from <= tol to
+            # rounding level (quadratic convergence); kept only where it does not grow.
+            up = u[ok] - _solve2(j[ok], res[ok])
+            better = np.max(np.abs(self.distort(up) - t[ok]), axis=-1) <= err[ok]
+            u[np.flatnonzero(ok)[better]] = up[better]
         u[~ok] = np.nan
         return u.reshape(shape)
+
+
+def _solve2(j: Array, res: Array) -> Array:
+    """J⁻¹ · res for Jacobians (N, 2, 2) and residuals (N, 2): the Newton step."""
+    det = _det(j)
+    dx = (j[..., 1, 1] * res[:, 0] - j[..., 0, 1] * res[:, 1]) / det
+    dy = (-j[..., 1, 0] * res[:, 0] + j[..., 0, 0] * res[:, 1]) / det
+    return np.stack([dx, dy], axis=-1)
+
+
+def _det(j: Array) -> Array:
+    """Determinants of 2×2 matrices (..., 2, 2)."""
+    return np.asarray(j[..., 0, 0] * j[..., 1, 1] - j[..., 0, 1] * j[..., 1, 0], dtype=np.float64)
 
 
 def _powers(r2: Array, exps: tuple[int, ...]) -> list[Array]:

@@ -1,0 +1,146 @@
+"""`phonestereo check-set` and `phonestereo convert-calibration`: the files of DESIGN §4."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from phonestereo.cli.app import app
+from phonestereo.errors import InputError
+from phonestereo.io import (
+    Calibration,
+    export_opencv_yaml,
+    import_opencv_yaml,
+    load_calibration,
+    load_capture_set,
+    read_gray,
+    save_calibration,
+)
+
+_YAML = (".yml", ".yaml", ".xml")
+
+
+def _fail(exc: InputError) -> typer.Exit:
+    # escape: messages hold brackets ("[x, y, w, h]") that Rich would read as markup.
+    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
+    return typer.Exit(2)
+
+
+def _size(text: str | None, name: str) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError as exc:
+        raise typer.BadParameter(f"{name} must be WIDTHxHEIGHT, e.g. 640x480") from exc
+    return w, h
+
+
+def calibration_summary(cal: Calibration) -> dict[str, Any]:
+    """The numbers an engineer checks first: focal lengths, zoom, baseline, conditions."""
+    rig = cal.rig
+    return {
+        "wide": {"size": list(rig.wide.size), "f_px": rig.wide.f, "lens": rig.wide.lens.name},
+        "tele": {"size": list(rig.tele.size), "f_px": rig.tele.f, "lens": rig.tele.lens.name},
+        "zoom": rig.zoom,
+        "baseline_m": rig.baseline_m,
+        "t_m": rig.T_tele_wide.t.tolist(),
+        "rms_px": cal.rms_px,
+        "focus_distance_m": cal.conditions.focus_distance_m,
+        "has_covariance": cal.covariance is not None,
+    }
+
+
+@app.command("check-set")
+def check_set(
+    folder: Annotated[Path, typer.Argument(help="Capture-set folder (with manifest.json).")],
+    decode: Annotated[
+        bool,
+        typer.Option(help="Also decode every image and check its size against the calibration."),
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+) -> None:
+    """Validate a capture set: manifest fields, image and calibration files (DESIGN §4)."""
+    try:
+        cs = load_capture_set(folder)
+        cal = load_calibration(cs.calibration_path())
+        if decode:
+            sizes = {"wide": cal.rig.wide.size, "tele": cal.rig.tele.size}
+            for c in cs.captures():
+                for cam, path in zip(("wide", "tele"), cs.image_paths(c.id), strict=True):
+                    h, w = read_gray(path).shape
+                    if (w, h) != sizes[cam]:
+                        raise InputError(
+                            f"capture '{c.id}' {cam} image '{path}' is {w}x{h} but the "
+                            f"calibration's {cam} camera is {sizes[cam][0]}x{sizes[cam][1]}"
+                        )
+    except InputError as exc:
+        raise _fail(exc) from exc
+    caps = cs.captures()
+    summary: dict[str, Any] = {
+        "folder": str(cs.root),
+        "captures": len(caps),
+        "kinds": dict(sorted(Counter(c.kind for c in caps).items())),
+        "focus_groups": sorted({c.focus_group for c in caps if c.focus_group}),
+        "with_temperature": sum(c.temperature_c is not None for c in caps),
+        "time_s": [min(c.time_s for c in caps), max(c.time_s for c in caps)] if caps else [],
+        "images_decoded": decode,
+        "calibration": calibration_summary(cal),
+    }
+    if as_json:
+        typer.echo(json.dumps(summary, indent=1))
+        return
+    cal_s = summary["calibration"]
+    typer.echo(
+        f"ok: {len(caps)} captures {summary['kinds']}, {len(summary['focus_groups'])} focus "
+        f"groups; calibration f = {cal_s['wide']['f_px']:.1f} / {cal_s['tele']['f_px']:.1f} px "
+        f"(×{cal_s['zoom']:.2f}), baseline {cal_s['baseline_m'] * 1000:.2f} mm"
+    )
+
+
+@app.command("convert-calibration")
+def convert_calibration(
+    src: Annotated[Path, typer.Argument(help="calibration.json or OpenCV .yml/.yaml/.xml.")],
+    dst: Annotated[Path, typer.Argument(help="Output: .json, or .yml/.yaml/.xml for OpenCV.")],
+    extrinsics: Annotated[
+        Path | None, typer.Option(help="OpenCV extrinsics.yml (R, T) when SRC holds M1..D2.")
+    ] = None,
+    wide_size: Annotated[str | None, typer.Option(help="Wide image WIDTHxHEIGHT.")] = None,
+    tele_size: Annotated[str | None, typer.Option(help="Tele image WIDTHxHEIGHT.")] = None,
+    t_unit_m: Annotated[
+        float, typer.Option(help="Metres per unit of OpenCV's T (e.g. the square size).")
+    ] = 1.0,
+    first_camera: Annotated[
+        str, typer.Option(help="Which camera is OpenCV's camera 1: wide or tele.")
+    ] = "wide",
+) -> None:
+    """Convert a calibration between phonestereo JSON and OpenCV FileStorage YAML."""
+    if first_camera not in ("wide", "tele"):
+        raise typer.BadParameter("--first-camera must be 'wide' or 'tele'")
+    try:
+        if src.suffix.lower() in _YAML:
+            cal = import_opencv_yaml(
+                src,
+                extrinsics,
+                wide_size=_size(wide_size, "--wide-size"),
+                tele_size=_size(tele_size, "--tele-size"),
+                t_unit_m=t_unit_m,
+                first_camera="wide" if first_camera == "wide" else "tele",
+            )
+        else:
+            cal = load_calibration(src)
+        out = (
+            export_opencv_yaml(dst, cal)
+            if dst.suffix.lower() in _YAML
+            else save_calibration(dst, cal)
+        )
+    except InputError as exc:
+        raise _fail(exc) from exc
+    c = calibration_summary(cal)
+    typer.echo(f"wrote {out} (baseline {c['baseline_m'] * 1000:.3f} mm, zoom ×{c['zoom']:.3f})")

@@ -1,0 +1,122 @@
+"""Reading and writing capture images (8-bit grayscale in, PNG or JPEG out).
+
+Files are read as bytes and decoded with :func:`cv2.imdecode` (so any path the OS accepts
+works) in grayscale mode; PNG is written with a fixed compression level, which makes equal
+images give byte-identical files.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> img = np.zeros((1500, 2000), np.uint8)
+>>> with tempfile.TemporaryDirectory() as d:
+...     p = write_image(pathlib.Path(d) / "wide.png", img)
+...     read_gray(p).shape                       # (H, W) = (height, width)
+(1500, 2000)
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from phonestereo.errors import InputError, ShapeError
+
+PNG_COMPRESSION = 3
+_PNG = (".png",)
+_JPEG = (".jpg", ".jpeg")
+
+
+def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
+    """Read an image file as 8-bit grayscale.
+
+    Parameters
+    ----------
+    path : path
+        Image file (any format OpenCV decodes: PNG, JPEG, TIFF, ...). Colour images are
+        converted to gray; 16-bit images are scaled to 8 bits by OpenCV.
+
+    Returns
+    -------
+    ndarray, shape (H, W), uint8
+
+    Raises
+    ------
+    InputError
+        The file is missing, cannot be decoded or is empty.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"image file not found: '{p}'; check the path")
+    try:
+        data = np.fromfile(p, dtype=np.uint8)
+    except OSError as exc:
+        raise InputError(f"cannot read image file '{p}': {exc}") from exc
+    if data.size == 0:
+        raise InputError(f"image file '{p}' is empty (0 bytes); re-export the image")
+    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise InputError(
+            f"cannot decode image file '{p}' ({data.size} bytes); it is not an image OpenCV "
+            "reads (use PNG or JPEG) or it is truncated"
+        )
+    if img.size == 0:
+        raise InputError(f"image file '{p}' decodes to an empty image")
+    return np.ascontiguousarray(img, dtype=np.uint8)
+
+
+def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int = 95) -> Path:
+    """Write an image as PNG (lossless, deterministic bytes) or JPEG, chosen by the suffix.
+
+    Parameters
+    ----------
+    path : path
+        Destination ending in ``.png``, ``.jpg`` or ``.jpeg``; parent folders are created.
+    image : array_like, shape (H, W) or (H, W, 3) (BGR)
+        uint8 (or uint16 for PNG).
+    jpeg_quality : int
+        JPEG quality 1–100 (ignored for PNG).
+
+    Returns
+    -------
+    Path
+        The written path.
+
+    Raises
+    ------
+    InputError
+        Unknown suffix or a dtype the format cannot hold.
+    ShapeError
+        An image that is not (H, W) or (H, W, 3) with H, W > 0.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in _PNG + _JPEG:
+        raise InputError(f"cannot write '{p}': use a .png (lossless) or .jpg/.jpeg suffix")
+    img = np.asarray(image)
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3) or 0 in img.shape:
+        raise ShapeError(f"image must have shape (H, W) or (H, W, 3), got {img.shape}")
+    allowed = (np.uint8, np.uint16) if suffix in _PNG else (np.uint8,)
+    if img.dtype.type not in allowed:
+        raise InputError(
+            f"cannot write a {img.dtype} image as {suffix}; convert to uint8 first "
+            "(e.g. np.clip(np.rint(img), 0, 255).astype(np.uint8))"
+        )
+    if suffix in _PNG:
+        params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION]
+    else:
+        if not 1 <= int(jpeg_quality) <= 100:
+            raise InputError(f"jpeg_quality must be in 1..100, got {jpeg_quality}")
+        params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)]
+    ok, buf = cv2.imencode(suffix, np.ascontiguousarray(img), params)
+    if not ok:
+        raise InputError(f"OpenCV could not encode the image for '{p}'")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
+    buf.tofile(tmp)
+    os.replace(tmp, p)
+    return p
