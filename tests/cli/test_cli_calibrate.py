@@ -18,7 +18,7 @@ pytestmark = pytest.mark.skipif(not DATA.exists(), reason="shared/data not besid
 
 def _run(*args: str) -> tuple[int, str]:
     res = CliRunner().invoke(app, list(args))
-    return res.exit_code, res.output
+    return res.exit_code, " ".join(res.output.split())  # Rich may wrap long messages
 
 
 def test_stereo_calibration_json(tmp_path: Path) -> None:
@@ -59,7 +59,7 @@ def test_wrong_board_size_names_the_fix(tmp_path: Path) -> None:
         str(tmp_path / "c.json"),
     )
     assert code == 2
-    assert "more inner corners than 8x6" in out.replace("\n", " ")
+    assert "more inner corners than 8x6" in out
 
 
 def test_empty_glob_and_mixed_sizes(tmp_path: Path) -> None:
@@ -90,4 +90,4 @@ def test_empty_glob_and_mixed_sizes(tmp_path: Path) -> None:
         "--out",
         str(tmp_path / "c.json"),
     )
-    assert code == 2 and "must share a size" in out.replace("\n", " ")
+    assert code == 2 and "must share a size" in out

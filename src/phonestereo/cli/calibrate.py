@@ -65,7 +65,7 @@ def calibrate(
                 progress=lambda _p: bar.advance(task),
             )
     except InputError as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
         raise typer.Exit(2) from exc
     out.parent.mkdir(parents=True, exist_ok=True)
     names, cov = intrinsic_extrinsic_covariance(result)
