@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401  (registers commands)
 from phonestereo.cli import charts as _charts  # noqa: F401
+from phonestereo.cli import demo as _demo  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401
+from phonestereo.cli import simulate as _simulate  # noqa: F401
 from phonestereo.cli.app import app
 
 __all__ = ["app", "main"]
