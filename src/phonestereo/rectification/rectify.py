@@ -1,0 +1,279 @@
+"""The :class:`Rectification` of a wide/tele rig in one of the thesis's three modes.
+
+Thesis §1.3.3 (``tele-to-wide``), §3.2 fix 2 (``undistort-both``), §3.3 (``canonical``); the
+modes are described in :mod:`phonestereo.rectification.options`. Conventions (DESIGN §5): after
+rectification d = x_wide − x_tele > 0 in front and e = y_wide − y_tele; the tele centre is on
+the rectified +x axis side. A vertical-baseline module is quarter-turned (its rectified images
+have width and height swapped; :mod:`~phonestereo.rectification.frames`).
+
+Point rectification is exact (undistort → rotate → project, no resampling) and reproduces what
+each mode's images show, including ``tele-to-wide``'s distortion mismatch: there a tele pixel
+goes to where the *wide* camera, moved to the tele's centre, would see the point (the wide's
+lens and focal length, the wide's orientation), and a wide pixel only moves by the integer crop
+(and the quarter turn).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from phonestereo.errors import ShapeError
+from phonestereo.geometry import Camera, Rig, depth_from_disparity
+from phonestereo.geometry._checks import Array, as_points, frozen
+from phonestereo.rectification import frames, maps
+from phonestereo.rectification.options import Mode, RectifyOptions, check_mode
+from phonestereo.rectification.points import from_rectified, to_rectified
+from phonestereo.rectification.window import place_window
+
+
+@dataclass(frozen=True, eq=False)
+class Rectification:
+    """A rectified wide/tele pair: rotations, rectified cameras, point and image maps.
+
+    Build it with :meth:`from_rig`. Attributes are read-only.
+
+    Attributes
+    ----------
+    mode : {"tele-to-wide", "undistort-both", "canonical"}
+    rig : Rig
+        The calibration it was built from.
+    options : RectifyOptions
+    R_rect_wide, R_rect_tele : ndarray, shape (3, 3)
+        Wide / tele camera frame → rectified frame (directions).
+    wide_rect, tele_rect : Camera
+        The rectified cameras (same K and size; pinhole except in ``tele-to-wide``, where both
+        carry the wide's lens).
+    quarter_turns : int
+        k of the k·90° turn about the optical axis that puts the baseline nearest +x (for
+        ``canonical`` the nearest such turn, contained in R_rect_wide).
+
+    Examples
+    --------
+    A folded ×3 module, tele 12 mm below the wide: a point 2 m in front of the wide gives
+    d = f·B/Z = 1500 · 0.012 / 2 = 9 px along the rectified x axis, and the rectified images
+    are portrait (the tele's 2000×1500 view at the wide's scale, turned by 90°).
+
+    >>> from phonestereo.geometry import Transform
+    >>> wide = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)
+    >>> rig = Rig(wide, wide.scaled(3.0), Transform.from_rotvec([0, 0, 0], [0, -0.012, 0]))
+    >>> rect = Rectification.from_rig(rig, "canonical")
+    >>> q_wide, q_tele = rig.project([[0.05, -0.02, 2.0]])
+    >>> d, e = rect.disparity(q_wide, q_tele)
+    >>> round(float(d[0]), 9), round(float(e[0]), 9), rect.wide_rect.size
+    (9.0, 0.0, (501, 667))
+    >>> round(float(rect.depth(d)[0]), 9)
+    2.0
+    """
+
+    mode: Mode
+    rig: Rig
+    options: RectifyOptions
+    R_rect_wide: Array
+    R_rect_tele: Array
+    wide_rect: Camera
+    tele_rect: Camera
+    quarter_turns: int
+    _cache: dict[tuple[str, int], tuple[NDArray[np.float32], NDArray[np.float32]]] = field(
+        default_factory=dict, repr=False
+    )
+
+    def __post_init__(self) -> None:
+        check_mode(self.mode)
+        for name in ("R_rect_wide", "R_rect_tele"):
+            r = np.asarray(getattr(self, name), dtype=np.float64)
+            if r.shape != (3, 3) or not np.allclose(r @ r.T, np.eye(3), atol=1e-9):
+                raise ShapeError(f"{name} must be a 3×3 rotation matrix")
+            object.__setattr__(self, name, frozen(r))
+
+    # --- construction ---------------------------------------------------------------------
+    @classmethod
+    def from_rig(
+        cls, rig: Rig, mode: str = "canonical", options: RectifyOptions | None = None
+    ) -> Rectification:
+        """Rectify ``rig`` in ``mode``.
+
+        Parameters
+        ----------
+        rig : Rig
+            Wide, tele and T_tele_wide (e.g. ``load_calibration(path).rig``).
+        mode : {"tele-to-wide", "undistort-both", "canonical"}
+        options : RectifyOptions, optional
+            Resolution, window and map grid.
+
+        Raises
+        ------
+        InputError
+            Unknown mode, ROI outside the wide image, a skewed camera to quarter-turn.
+        PhysicsError
+            A baseline mostly along the optical axis, or a calibration whose views do not
+            overlap.
+        """
+        m = check_mode(mode)
+        opts = options or RectifyOptions()
+        center = rig.tele_center_in_wide
+        k = frames.quarter_turns_for(center)
+        R_wide = frames.canonical_rotation(center) if m == "canonical" else frames.quarter_turn(k)
+        R_tele = R_wide @ rig.T_tele_wide.R.T
+        if m == "tele-to-wide":
+            template = frames.quarter_turn_camera(rig.wide, k)
+            factor = opts.scale * (rig.zoom if opts.resolution == "tele" else 1.0)
+            if factor != 1.0:
+                template = template.resized(factor)
+        else:
+            f = opts.scale * (rig.wide.f if opts.resolution == "wide" else rig.tele.f)
+            template = Camera((1, 1), f, f, 0.0, 0.0)
+        cams = {"wide": (rig.wide, R_wide), "tele": (rig.tele, R_tele)}
+        rect = place_window(template, cams, opts)
+        return cls(m, rig, opts, R_wide, R_tele, rect, rect, k)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Rectification:
+        """Rebuild from :meth:`to_dict` (from its rig, mode and options)."""
+        opts = RectifyOptions(**{k: v for k, v in data["options"].items()})
+        return cls.from_rig(Rig.from_dict(data["rig"]), data["mode"], opts)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: mode, f_px, baseline_m, rectified cameras, rotations, options, rig."""
+        return {
+            "mode": self.mode,
+            "f_px": self.f_px,
+            "baseline_m": self.baseline_m,
+            "quarter_turns": self.quarter_turns,
+            "size": list(self.wide_rect.size),
+            "tele_center_rect_m": self.tele_center_rect.tolist(),
+            "R_rect_wide": self.R_rect_wide.tolist(),
+            "R_rect_tele": self.R_rect_tele.tolist(),
+            "wide_rect": self.wide_rect.to_dict(),
+            "tele_rect": self.tele_rect.to_dict(),
+            "options": self.options.to_dict(),
+            "rig": self.rig.to_dict(),
+        }
+
+    # --- scalars --------------------------------------------------------------------------
+    @property
+    def tele_center_rect(self) -> Array:
+        """Tele optical centre in the rectified frame (3,), metres; (|c|, 0, 0) if canonical."""
+        return frozen(self.R_rect_wide @ self.rig.tele_center_in_wide)
+
+    @property
+    def baseline_m(self) -> float:
+        """B of eq. (4): the tele centre's rectified x coordinate (= |t| in ``canonical``)."""
+        return float(self.tele_center_rect[0])
+
+    @property
+    def f_px(self) -> float:
+        """f of eq. (4): the rectified focal length along x, pixels."""
+        return float(self.wide_rect.fx)
+
+    # --- points ---------------------------------------------------------------------------
+    def points_wide(self, q: Any) -> Array:
+        """Raw wide pixels (..., 2) → rectified pixels (..., 2), exact; NaN if unmappable."""
+        return to_rectified(self.rig.wide, self.wide_rect, self.R_rect_wide, q)
+
+    def points_tele(self, q: Any) -> Array:
+        """Raw tele pixels (..., 2) → rectified pixels (..., 2), exact; NaN if unmappable."""
+        return to_rectified(self.rig.tele, self.tele_rect, self.R_rect_tele, q)
+
+    def unrectify_wide(self, q: Any) -> Array:
+        """Rectified wide pixels (..., 2) → raw wide pixels (..., 2): the inverse point map."""
+        return from_rectified(self.rig.wide, self.wide_rect, self.R_rect_wide, q)
+
+    def unrectify_tele(self, q: Any) -> Array:
+        """Rectified tele pixels (..., 2) → raw tele pixels (..., 2): the inverse point map."""
+        return from_rectified(self.rig.tele, self.tele_rect, self.R_rect_tele, q)
+
+    def disparity(
+        self, q_wide: Any, q_tele: Any, *, rectified: bool = False
+    ) -> tuple[Array, Array]:
+        """Disparity d = x_wide − x_tele and non-disparity error e = y_wide − y_tele, pixels.
+
+        Parameters
+        ----------
+        q_wide, q_tele : array_like, shape (..., 2)
+            Matching pixels, raw (default) or already rectified (``rectified=True``).
+
+        Returns
+        -------
+        d, e : ndarray, shape (...)
+            Rectified pixels; d > 0 in front (DESIGN §5).
+        """
+        qw = as_points(q_wide, 2, "q_wide")
+        qt = as_points(q_tele, 2, "q_tele")
+        if qw.shape != qt.shape:
+            raise ShapeError(
+                f"q_wide and q_tele must have the same shape (one match per row), got "
+                f"{qw.shape} and {qt.shape}"
+            )
+        if not rectified:
+            qw, qt = self.points_wide(qw), self.points_tele(qt)
+        diff = qw - qt
+        return np.asarray(diff[..., 0]), np.asarray(diff[..., 1])
+
+    def depth(self, d: Any) -> Array:
+        """Z = f·B/d (eq. 4) along the rectified z axis, metres; NaN for d ≤ 0.
+
+        Exact for ``canonical`` with a perfect calibration; in the rotation-only modes t_z and
+        the non-baseline translation make it approximate (§3.3), and in ``tele-to-wide`` the
+        lens distortion too.
+        """
+        return depth_from_disparity(d, self.f_px, self.baseline_m)
+
+    def backproject(self, q_wide_rect: Any, d: Any) -> Array:
+        """Rectified wide pixels (..., 2) and disparities (...) → wide-frame points (..., 3), m.
+
+        Z = f·B/d along the rectified ray of each pixel, rotated back into the wide frame
+        (R_rect_wideᵀ), so the depth along the wide's own optical axis is ``[..., 2]``.
+        """
+        rays = self.wide_rect.unproject(as_points(q_wide_rect, 2, "q_wide_rect"))
+        z = self.depth(d)
+        return np.asarray((rays * z[..., None]) @ self.R_rect_wide, dtype=np.float64)
+
+    # --- images ---------------------------------------------------------------------------
+    def _maps(self, role: str, step: int | None) -> tuple[NDArray[np.float32], ...]:
+        s = self.options.grid_step_px if step is None else int(step)
+        key = (role, s)
+        if key not in self._cache:
+            raw, rect, R = self._chain(role)
+            self._cache[key] = maps.build_map(raw, rect, R, s)
+        return self._cache[key]
+
+    def _chain(self, role: str) -> tuple[Camera, Camera, Array]:
+        if role == "wide":
+            return self.rig.wide, self.wide_rect, self.R_rect_wide
+        return self.rig.tele, self.tele_rect, self.R_rect_tele
+
+    def maps_wide(self, step: int | None = None) -> tuple[NDArray[np.float32], ...]:
+        """(map_x, map_y), float32 (H', W') raw wide pixels per rectified pixel, for cv2.remap.
+
+        ``step`` overrides ``options.grid_step_px`` (1: exact at every pixel). Pixels with no
+        raw source hold :data:`~phonestereo.rectification.maps.INVALID`.
+        """
+        return self._maps("wide", step)
+
+    def maps_tele(self, step: int | None = None) -> tuple[NDArray[np.float32], ...]:
+        """(map_x, map_y) of the tele, as :meth:`maps_wide`."""
+        return self._maps("tele", step)
+
+    def remap(
+        self, image_wide: Any, image_tele: Any, *, interpolation: str = "linear"
+    ) -> tuple[NDArray[Any], NDArray[Any]]:
+        """Rectify an image pair → (wide_rect, tele_rect), each (H', W'[, C]).
+
+        Raises
+        ------
+        InputError, ShapeError
+            Empty images, a dtype OpenCV cannot remap, or an image whose size is not its
+            calibrated camera's (the message names both sizes).
+        """
+        images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
+        out = []
+        for role, img in zip(("wide", "tele"), images, strict=True):
+            raw, rect, _ = self._chain(role)
+            shrink = raw.f / rect.f
+            mx, my = self._maps(role, None)
+            out.append(maps.remap_image(img, mx, my, shrink, self.options.antialias, interpolation))
+        return out[0], out[1]
