@@ -9,9 +9,9 @@ from phonestereo.geometry.epipolar import (
     fundamental_from_essential,
     skew,
 )
-from phonestereo.geometry.lens import (
+from phonestereo.geometry.lens import LensModel
+from phonestereo.geometry.lens_models import (
     LENS_MODELS,
-    LensModel,
     OpenCV5,
     OpenCV8,
     RadialOdd,

@@ -13,7 +13,8 @@ import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen, require_positive
-from phonestereo.geometry.lens import LensModel, lens_from_dict, make_lens
+from phonestereo.geometry.lens import LensModel
+from phonestereo.geometry.lens_models import lens_from_dict, make_lens
 
 
 def _default_lens() -> LensModel:

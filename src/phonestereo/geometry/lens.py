@@ -75,6 +75,11 @@ class LensModel(ABC):
     def _tangential_columns(self) -> tuple[int, int]:
         """Indices of p1 and p2 in the coefficient vector."""
 
+    @property
+    def tangential_columns(self) -> tuple[int, int]:
+        """Indices of the tangential coefficients (p1, p2) in :attr:`coefficients`."""
+        return self._tangential_columns()
+
     # --- shared API -----------------------------------------------------------------------
     @property
     def n_coefficients(self) -> int:
@@ -98,6 +103,7 @@ class LensModel(ABC):
 
         Examples
         --------
+        >>> from phonestereo.geometry import OpenCV5
         >>> round(OpenCV5((-0.1, 0.0, 0.0, 0.0, 0.0)).valid_radius, 2)   # 1/sqrt(3·0.1)
         1.82
         """
@@ -140,6 +146,7 @@ class LensModel(ABC):
 
         Examples
         --------
+        >>> from phonestereo.geometry import OpenCV5
         >>> lens = OpenCV5((0.1, 0.0, 0.0, 0.0, 0.0))
         >>> lens.distort([0.5, 0.0]).round(6).tolist()   # 0.5·(1 + 0.1·0.25)
         [0.5125, 0.0]
@@ -218,6 +225,7 @@ class LensModel(ABC):
 
         Examples
         --------
+        >>> from phonestereo.geometry import OpenCV5
         >>> lens = OpenCV5((-0.2, 0.05, 1e-3, -5e-4, 0.0))
         >>> u = lens.undistort(lens.distort([0.3, -0.2]))
         >>> bool(np.allclose(u, [0.3, -0.2], atol=1e-12))
@@ -285,152 +293,3 @@ def _solve2(j: Array, res: Array) -> Array:
 def _det(j: Array) -> Array:
     """Determinants of 2×2 matrices (..., 2, 2)."""
     return np.asarray(j[..., 0, 0] * j[..., 1, 1] - j[..., 0, 1] * j[..., 1, 0], dtype=np.float64)
-
-
-def _powers(r2: Array, exps: tuple[int, ...]) -> list[Array]:
-    return [r2**e for e in exps]
-
-
-@dataclass(frozen=True)
-class OpenCV5(LensModel):
-    """OpenCV's 5-coefficient Brown–Conrady model (k1, k2, p1, p2, k3)."""
-
-    name: ClassVar[str] = "opencv5"
-
-    def _check_count(self, n: int) -> None:
-        if n != 5:
-            raise InputError(f"lens 'opencv5' takes 5 coefficients (k1, k2, p1, p2, k3), got {n}")
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[2], self.coefficients[3]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return 2, 3
-
-    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
-        k1, k2, _, _, k3 = self.coefficients
-        r4, r6 = r2 * r2, r2 * r2 * r2
-        g = 1 + k1 * r2 + k2 * r4 + k3 * r6
-        dg = k1 + 2 * k2 * r2 + 3 * k3 * r4
-        dc = np.zeros((*r2.shape, 5))
-        dc[..., 0], dc[..., 1], dc[..., 4] = r2, r4, r6
-        return g, dg, dc
-
-
-@dataclass(frozen=True)
-class OpenCV8(LensModel):
-    """OpenCV's 8-coefficient rational model (k1, k2, p1, p2, k3, k4, k5, k6)."""
-
-    name: ClassVar[str] = "opencv8"
-
-    def _check_count(self, n: int) -> None:
-        if n != 8:
-            raise InputError(
-                f"lens 'opencv8' takes 8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6), got {n}"
-            )
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[2], self.coefficients[3]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return 2, 3
-
-    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
-        k1, k2, _, _, k3, k4, k5, k6 = self.coefficients
-        r4, r6 = r2 * r2, r2 * r2 * r2
-        num = 1 + k1 * r2 + k2 * r4 + k3 * r6
-        den = 1 + k4 * r2 + k5 * r4 + k6 * r6
-        dnum = k1 + 2 * k2 * r2 + 3 * k3 * r4
-        dden = k4 + 2 * k5 * r2 + 3 * k6 * r4
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g = num / den
-            dg = (dnum * den - num * dden) / (den * den)
-            dc = np.zeros((*r2.shape, 8))
-            dc[..., 0], dc[..., 1], dc[..., 4] = r2 / den, r4 / den, r6 / den
-            q = -num / (den * den)
-            dc[..., 5], dc[..., 6], dc[..., 7] = q * r2, q * r4, q * r6
-        return g, dg, dc
-
-
-@dataclass(frozen=True)
-class RadialOdd(LensModel):
-    """Radial polynomial with every degree, odd ones included (thesis §3.2 fix 1).
-
-    ``g = 1 + Σᵢ kᵢ rⁱ`` for i = 1..n, then the OpenCV tangential terms; coefficients
-    ``(k1, …, kn, p1, p2)`` with 1 ≤ n ≤ 10.
-    """
-
-    name: ClassVar[str] = "radial-odd"
-
-    def _check_count(self, n: int) -> None:
-        if not 3 <= n <= 12:
-            raise InputError(
-                "lens 'radial-odd' takes (k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms, "
-                f"got {n} coefficients"
-            )
-
-    @property
-    def n_radial(self) -> int:
-        """Number of radial terms n."""
-        return self.n_coefficients - 2
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[-2], self.coefficients[-1]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return self.n_coefficients - 2, self.n_coefficients - 1
-
-    def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
-        r = np.sqrt(r2)
-        ks = self.coefficients[:-2]
-        g = np.ones_like(r2)
-        dg = np.zeros_like(r2)
-        dc = np.zeros((*r2.shape, self.n_coefficients))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            for i, k in enumerate(ks, start=1):
-                ri = r**i
-                g = g + k * ri
-                dc[..., i - 1] = ri
-                # dg/d(r²) = Σ i·k·r^(i−2) / 2; r = 0 is handled by callers via x²·g'.
-                dg = dg + 0.5 * i * k * r ** (i - 2)
-        return g, dg, dc
-
-
-LENS_MODELS: dict[str, type[LensModel]] = {
-    OpenCV5.name: OpenCV5,
-    OpenCV8.name: OpenCV8,
-    RadialOdd.name: RadialOdd,
-}
-
-
-def make_lens(name: str, coefficients: Any | None = None, *, n_radial: int = 6) -> LensModel:
-    """Build a lens model by name; zero coefficients (a pinhole lens) when none are given.
-
-    Parameters
-    ----------
-    name : {"opencv5", "opencv8", "radial-odd"}
-    coefficients : array_like, optional
-        Coefficients in the model's order.
-    n_radial : int
-        Number of radial terms for ``radial-odd`` when ``coefficients`` is omitted.
-
-    Raises
-    ------
-    InputError
-        Unknown model name or wrong coefficient count.
-    """
-    if name not in LENS_MODELS:
-        raise InputError(f"unknown lens model '{name}'; choose one of {sorted(LENS_MODELS)}")
-    cls = LENS_MODELS[name]
-    if coefficients is None:
-        n = {"opencv5": 5, "opencv8": 8}.get(name, n_radial + 2)
-        coefficients = (0.0,) * n
-    return cls(tuple(float(c) for c in np.ravel(np.asarray(coefficients, dtype=float))))
-
-
-def lens_from_dict(data: dict[str, Any]) -> LensModel:
-    """Inverse of :meth:`LensModel.to_dict`."""
-    try:
-        return make_lens(str(data["model"]), data["coefficients"])
-    except KeyError as exc:
-        raise InputError(f"lens entry needs 'model' and 'coefficients', missing {exc}") from exc

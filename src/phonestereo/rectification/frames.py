@@ -134,7 +134,7 @@ def rotate_lens(lens: LensModel, k: int) -> LensModel:
     """
     if k % 4 == 0:
         return lens
-    i1, i2 = lens._tangential_columns()  # the only model-specific knowledge needed
+    i1, i2 = lens.tangential_columns  # the only model-specific knowledge needed
     coeffs = list(lens.coefficients)
     p2, p1 = quarter_turn(k)[:2, :2] @ [coeffs[i2], coeffs[i1]]
     coeffs[i1], coeffs[i2] = float(p1), float(p2)
