@@ -9,6 +9,7 @@ from __future__ import annotations
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401  (registers commands)
 from phonestereo.cli import charts as _charts  # noqa: F401
 from phonestereo.cli import demo as _demo  # noqa: F401
+from phonestereo.cli import detect as _detect  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401
 from phonestereo.cli import rectify as _rectify  # noqa: F401
 from phonestereo.cli import simulate as _simulate  # noqa: F401
