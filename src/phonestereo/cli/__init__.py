@@ -13,6 +13,7 @@ from phonestereo.cli import detect as _detect  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401
 from phonestereo.cli import rectify as _rectify  # noqa: F401
 from phonestereo.cli import simulate as _simulate  # noqa: F401
+from phonestereo.cli import store as _store  # noqa: F401
 from phonestereo.cli.app import app
 
 __all__ = ["app", "main"]

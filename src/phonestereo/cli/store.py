@@ -1,0 +1,117 @@
+"""``phonestereo store stats|export|vacuum FILE``: inspect and maintain a fix store (DESIGN §4).
+
+Thin wrappers over :class:`phonestereo.learning.store.FixStore`. A store the user can write is
+opened normally (an older schema is migrated, with a ``.v<N>.bak`` copy kept); one they cannot
+write is opened read-only. Errors (damaged file, bad path) print the store's message and exit 2.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from phonestereo.cli.app import app
+from phonestereo.errors import InputError, StoreError
+from phonestereo.learning.store import FixStore, StoreStats
+
+store_app = typer.Typer(
+    help="The fix store of learned disparity corrections: stats, export, vacuum.",
+    no_args_is_help=True,
+)
+app.add_typer(store_app, name="store")
+
+_FILE = typer.Argument(help="Fix store file (SQLite).", show_default=False)
+
+
+def _fail(exc: Exception) -> typer.Exit:
+    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
+    return typer.Exit(2)
+
+
+def _open(path: Path, write: bool = False) -> FixStore:
+    """Open an existing store (never create one from an inspection command)."""
+    if not path.exists():
+        raise StoreError(f"the fix store '{path}' does not exist; check the path")
+    readonly = not write and not os.access(path, os.W_OK)
+    return FixStore(path, readonly=readonly)
+
+
+def _kb(n: int) -> str:
+    return f"{n / 1024:.1f} kB"
+
+
+def format_stats(s: StoreStats) -> str:
+    """The human-readable summary printed by ``store stats``."""
+    lines = [
+        f"{s.path}: schema v{s.schema_version}, journal {s.journal_mode}, {_kb(s.size_bytes)}",
+        f"  {s.n_captures} captures, {s.n_observations} observations",
+    ]
+    for o, b in s.by_orientation.items():
+        lines.append(
+            f"  orientation {o}: {int(b['n'])} observations, correction "
+            f"{b['correction_mean_px']:+.3f} ± {b['correction_std_px']:.3f} px"
+        )
+    for title, counts in (("focus groups", s.by_focus_group), ("sources", s.by_source)):
+        if counts:
+            items = ", ".join(f"{k or '(none)'} ({v})" for k, v in sorted(counts.items()))
+            lines.append(f"  {title}: {items}")
+    units = {"depth_m": "m", "time_s": "s", "temperature_c": "°C", "d_measured_px": "px"}
+    spans = [
+        f"{col.rsplit('_', 1)[0]} {r[0]:.4g}–{r[1]:.4g} {unit}"
+        for col, unit in units.items()
+        if (r := s.ranges.get(col)) is not None
+    ]
+    if spans:
+        lines.append("  " + ", ".join(spans))
+    return "\n".join(lines)
+
+
+@store_app.command("stats")
+def stats(
+    file: Annotated[Path, _FILE],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Counts per orientation bucket, focus group and source; value ranges; integrity."""
+    try:
+        with _open(file) as st:
+            s = st.stats()
+            integrity = st.integrity()
+    except (StoreError, InputError) as exc:
+        raise _fail(exc) from exc
+    if as_json:
+        typer.echo(json.dumps({**s.to_dict(), "integrity": integrity}, indent=1))
+        return
+    typer.echo(format_stats(s) + f"\n  integrity: {integrity}")
+
+
+@store_app.command("export")
+def export(
+    file: Annotated[Path, _FILE],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Output .csv or .json.", show_default=False)
+    ],
+) -> None:
+    """Write every learned observation to CSV or JSON."""
+    try:
+        with _open(file) as st:
+            n = st.export(out)
+    except (StoreError, InputError) as exc:
+        raise _fail(exc) from exc
+    typer.echo(f"wrote {n} observations to {out}")
+
+
+@store_app.command("vacuum")
+def vacuum(file: Annotated[Path, _FILE]) -> None:
+    """Checkpoint the WAL and compact the file (waits for other writers, never loses data)."""
+    try:
+        with _open(file, write=True) as st:
+            before, after = st.vacuum()
+    except (StoreError, InputError) as exc:
+        raise _fail(exc) from exc
+    typer.echo(f"vacuumed {file}: {_kb(before)} → {_kb(after)}")
