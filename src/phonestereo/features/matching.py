@@ -1,0 +1,263 @@
+"""Sparse sub-pixel matching of a rectified wide/tele pair, with σ per match (thesis §1.2.1).
+
+Stages (each counted in :attr:`MatchResult.counts`):
+
+1. **keypoints** — DoG extrema with Hessian edge rejection (or SIFT) inside the ROI
+   (:mod:`~phonestereo.features.keypoints`);
+2. **search** — NCC of the window along the row band ± ``row_tolerance``, the peak's score,
+   uniqueness, convexity and left–right consistency (:mod:`~phonestereo.features.search`);
+3. **sub-pixel** — 2-D Lucas–Kanade (d, e, gain, offset, disparity gradient) on a cubic
+   B-spline: no pixel locking (:mod:`~phonestereo.features.subpixel`); it must converge near the
+   NCC peak, fit to within the noise and not be ill-conditioned;
+4. **σ** — the Cramér–Rao covariance from the window's gradients and the image noise, raised to
+   the window's residual misfit where it fits worse than noise (:mod:`~phonestereo.features.crlb`);
+   windows fitting much worse than the typical one, or with σ_d above a bound, are dropped;
+5. **global** — non-disparity error field, disparity histogram and neighbour support
+   (:mod:`~phonestereo.features.match_filters`).
+
+Conventions (DESIGN §5): left = wide, right = tele, rectified with disparity along x;
+``d = x_left − x_right``, ``e = y_left − y_right``; (x, y) are left pixels, (0, 0) the centre of
+the top-left pixel.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from phonestereo.errors import InputError
+from phonestereo.features import match_filters as gf
+from phonestereo.features.crlb import match_sigma, noise_sigma
+from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
+from phonestereo.features.match_config import MatchConfig, MatchResult
+from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
+from phonestereo.features.search import SearchResult, ncc_search
+from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
+
+F64 = NDArray[np.float64]
+Mask = NDArray[np.bool_]
+
+__all__ = ["MatchConfig", "MatchResult", "match_rectified"]
+
+
+def _empty(
+    counts: dict[str, int], noise: tuple[float, float], roi: Any, t0: float, why: str
+) -> MatchResult:
+    z = np.zeros(0)
+    return MatchResult(
+        np.zeros((0, 2)), z, z, z, z, z, z, counts, noise, tuple(roi), time.perf_counter() - t0, why
+    )
+
+
+def match_rectified(
+    left: Any,
+    right: Any,
+    *,
+    max_disparity: int,
+    min_disparity: int = 0,
+    roi: Any = None,
+    config: MatchConfig | None = None,
+) -> MatchResult:
+    """Sparse sub-pixel matches of a rectified pair with Cramér–Rao σ per match.
+
+    Parameters
+    ----------
+    left, right : array_like, shape (H, W) or (H, W, 3)
+        Rectified wide (left) and tele (right) images, same size, disparity along +x
+        (a scene point at x in the left image is at x − d in the right, d ≥ 0 in front).
+    max_disparity, min_disparity : int
+        Disparity search range, px (inclusive).
+    roi : (x, y, w, h), optional
+        Left-image region whose keypoints are matched (the search may leave it); default all.
+    config : MatchConfig, optional
+
+    Returns
+    -------
+    MatchResult
+        Matches, their σ, the survivors of every stage and the time; ``reason`` says why
+        there are none when the data give none.
+
+    Raises
+    ------
+    InputError / ShapeError
+        Unreadable, empty, non-finite or mismatched images, a bad disparity range, or an ROI
+        not inside the image.
+
+    Examples
+    --------
+    A random texture and a copy shifted 12.25 px to the left (exact Fourier shift):
+
+    >>> rng = np.random.default_rng(1)
+    >>> f = np.fft.fft2(rng.standard_normal((120, 160)))
+    >>> fy, fx = np.fft.fftfreq(120)[:, None], np.fft.fftfreq(160)[None, :]
+    >>> lp = np.exp(-2 * np.pi**2 * 1.5**2 * (fx**2 + fy**2))          # blur σ = 1.5 px
+    >>> left = 128 + 600 * np.real(np.fft.ifft2(f * lp))
+    >>> right = 128 + 600 * np.real(np.fft.ifft2(f * lp * np.exp(2j * np.pi * fx * 12.25)))
+    >>> res = match_rectified(left, right, max_disparity=24, config=MatchConfig(noise_sigma=0.5))
+    >>> len(res) > 50, round(float(np.median(res.d)), 2), round(float(np.median(res.e)), 2)
+    (True, 12.25, 0.0)
+    """
+    t0 = time.perf_counter()
+    cfg = config if config is not None else MatchConfig()
+    lf, rt = as_image(left, "left"), as_image(right, "right")
+    check_pair(lf, rt, cfg.radius + cfg.row_tolerance + 4)
+    dmin, dmax = int(min_disparity), int(max_disparity)
+    if dmin != min_disparity or dmax != max_disparity or dmax <= dmin:
+        raise InputError(
+            f"disparity range must be integers with max_disparity > min_disparity, got "
+            f"[{min_disparity}, {max_disparity}]"
+        )
+    h, w = lf.shape
+    roi_t = parse_roi(roi, (w, h))
+    rx, ry, rw, rh = roi_t
+    r, ty = int(cfg.radius), int(cfg.row_tolerance)
+    guard = r + ty + 3  # keypoint windows, search rows and the sub-pixel slack stay in the image
+    ox, oy, cx1, cy1 = crop_box(roi_t, (w, h), dmin, dmax, guard + PREFILTER_MARGIN)
+    lc = np.ascontiguousarray(lf[oy:cy1, ox:cx1], dtype=np.float32)
+    rc = np.ascontiguousarray(rt[oy:cy1, ox:cx1], dtype=np.float32)
+    if cfg.noise_sigma is not None:
+        noise = (float(cfg.noise_sigma), float(cfg.noise_sigma))
+    else:
+        noise = (noise_sigma(lc), noise_sigma(rc))
+    box = (
+        max(rx, guard) - ox,
+        max(ry, guard) - oy,
+        min(rx + rw, w - guard) - ox,
+        min(ry + rh, h - guard) - oy,
+    )
+    xy = _keypoints(lc, box, noise[0], cfg)
+    counts = {"keypoints": len(xy)}
+    if not len(xy):
+        why = "no keypoints: the ROI has no texture above the noise"
+        if box[2] <= box[0] or box[3] <= box[1]:
+            why = f"no keypoints: the ROI is within {guard} px of the border (window + band)"
+        return _empty(counts, noise, roi_t, t0, why)
+    s = ncc_search(
+        lc,
+        rc,
+        xy,
+        radius=r,
+        min_d=dmin,
+        max_d=dmax,
+        row_tolerance=ty,
+        lr_tolerance=cfg.lr_tolerance,
+        lr_min_score=cfg.min_score if cfg.lr_check else np.inf,
+        lr_uniqueness=cfg.uniqueness,
+    )
+    idx = np.flatnonzero(_search_tests(s, cfg, counts))
+    if not len(idx):
+        return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
+    ref = refine_lk(
+        lc,
+        bspline_coefficients(lc),
+        bspline_coefficients(rc),
+        xy[idx],
+        s.d0[idx],
+        s.e0[idx],
+        radius=r,
+        sigma_w=cfg.sigma_w,
+        slant=cfg.slant,
+        max_slant=cfg.max_slant,
+        max_iter=cfg.max_iter,
+        tol=cfg.tol,
+    )
+    ok = ref.converged & (np.abs(ref.d - s.d0[idx]) <= cfg.max_shift)
+    ok &= np.abs(ref.e - s.e0[idx]) <= cfg.max_shift
+    counts["subpixel"] = int(ok.sum())
+    if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
+        fit = float(np.sqrt(np.median(ref.residual_var[ok] / (1 + ref.gain[ok] ** 2))))
+        noise = (min(noise[0], fit), min(noise[1], fit))
+    sd, se, _ = match_sigma(
+        ref.cov_unit, ref.residual_var, ref.gain, *noise, use_residual=cfg.residual_sigma
+    )
+    noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
+    with np.errstate(invalid="ignore"):
+        ok &= np.sqrt(ref.residual_var) <= cfg.max_normalized_residual * ref.template_std
+        ok &= ref.residual_var <= cfg.max_residual_ratio**2 * noise_var
+        counts["residual"] = int(ok.sum())
+        ok &= sd <= cfg.max_sigma_d
+    counts["sigma"] = int(ok.sum())
+    sel = np.flatnonzero(ok)
+    pts = xy[idx[sel]].astype(np.float64)
+    g = _global_filters(pts, ref.d[sel], ref.e[sel], cfg, counts)
+    sel, pts = sel[g], pts[g]
+    why = "" if len(sel) else "no match survived the sub-pixel fit and the global filters"
+    return MatchResult(
+        xy=pts + np.array([ox, oy], np.float64),
+        d=ref.d[sel],
+        e=ref.e[sel],
+        sigma_d=sd[sel],
+        sigma_e=se[sel],
+        score=s.score[idx[sel]],
+        zncc=ref.zncc[sel],
+        counts=counts,
+        noise_sigma=noise,
+        roi=roi_t,
+        seconds=time.perf_counter() - t0,
+        reason=why,
+    )
+
+
+def _keypoints(
+    image: NDArray[np.float32], box: tuple[int, ...], noise: float, cfg: MatchConfig
+) -> NDArray[np.int64]:
+    """Integer keypoints (N, 2) inside ``box`` = (x0, y0, x1, y1) of the working crop."""
+    x0, y0, x1, y1 = box
+    if cfg.detector == "sift":
+        kp = detect_sift(image, mask_box=(x0, y0, x1, y1), max_keypoints=cfg.max_keypoints)
+    else:
+        kp = detect_dog(
+            image,
+            mask_box=(x0, y0, x1, y1),
+            sigma=cfg.dog_sigma,
+            k=cfg.dog_k,
+            threshold=max(cfg.contrast * dog_noise_gain(cfg.dog_sigma, cfg.dog_k) * noise, 0.2),
+            edge_ratio=cfg.edge_ratio,
+            max_keypoints=cfg.max_keypoints,
+        )
+    return kp.xy.astype(np.int64)
+
+
+def _search_tests(s: SearchResult, cfg: MatchConfig, counts: dict[str, int]) -> Mask:
+    """NCC peak tests of §1.2.1: score, uniqueness, convexity, left–right (counted)."""
+    keep = s.searched & ~s.at_edge
+    counts["searched"] = int(keep.sum())
+    with np.errstate(invalid="ignore"):
+        keep &= s.score >= cfg.min_score
+        counts["score"] = int(keep.sum())
+        keep &= s.second < cfg.uniqueness * s.score
+        counts["unique"] = int(keep.sum())
+        keep &= s.curvature_x >= cfg.min_curvature
+        if cfg.row_tolerance > 0:
+            keep &= s.curvature_y >= cfg.min_curvature
+    counts["convex"] = int(keep.sum())
+    if cfg.lr_check:
+        keep &= s.lr_ok
+    counts["left_right"] = int(keep.sum())
+    return keep
+
+
+def _global_filters(pts: F64, d: F64, e: F64, cfg: MatchConfig, counts: dict[str, int]) -> Mask:
+    """Row-error field, disparity histogram and neighbour support, in that order (counted)."""
+    g = gf.row_error_filter(pts, e, floor_px=cfg.e_floor_px, k_mad=cfg.e_k_mad)
+    counts["row_error"] = int(g.sum())
+    if g.any():
+        sub = np.flatnonzero(g)
+        hist = gf.histogram_filter(d[sub], bin_px=cfg.hist_bin_px, min_count=cfg.hist_min_count)
+        g[sub[~hist]] = False
+    counts["histogram"] = int(g.sum())
+    if cfg.min_support > 0 and g.any():
+        sub = np.flatnonzero(g)
+        sup = gf.support_filter(
+            pts[sub],
+            d[sub],
+            k=cfg.support_k,
+            tol_px=cfg.support_tol_px,
+            min_support=cfg.min_support,
+        )
+        g[sub[~sup]] = False
+    counts["support"] = counts["matches"] = int(g.sum())
+    return g
