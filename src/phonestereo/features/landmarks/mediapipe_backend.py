@@ -1,0 +1,373 @@
+"""MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3, DESIGN §11).
+
+MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few percent of a
+2000-px image is never found on the full frame. The search therefore runs in two stages:
+
+1. **Find**: the full-range face detector on square tiles of an image pyramid — tile sides
+   ``max(W, H)``, half of it, a quarter, ... down to ``min_tile_px``, overlapping by half a
+   tile — then non-maximum suppression of the boxes (mapped to full-image pixels).
+2. **Measure**: for each box, a square crop ``crop_scale`` times the box side, centred on
+   it (padded with black past the image border), resampled to between ``crop_px`` pixels
+   a side (area interpolation down, cubic up), and Face Mesh (static images,
+   ``refine_landmarks=True``) on it. The mesh nearest the crop centre is mapped back:
+   MediaPipe's normalised ``x`` has 0 at the crop's left *edge*, so a crop starting at pixel
+   ``X0`` with side ``S`` maps it to ``X0 − 0.5 + x·S`` (DESIGN §5); ``z`` scales by ``S`` too.
+
+Faces found twice (overlapping tiles, neighbouring crops) are merged by pupil midpoint.
+Each face gets its pupils (iris centres), the thesis's eye centres
+(:mod:`~phonestereo.features.landmarks.eyes`) and its yaw from the 3-D mesh
+(:mod:`~phonestereo.features.landmarks.pose`). Profiles (|yaw| > ``max_yaw_rad``), faces with
+an eye outside the image and faces too small to measure are rejected with the reason.
+
+MediaPipe 0.10.21 ships its models in the wheel (no download). The model objects are created
+once per :meth:`MediaPipeBackend.detect` / :meth:`~MediaPipeBackend.detect_many` call.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.features.landmarks.base import (
+    F64,
+    U8,
+    Face,
+    FaceResult,
+    ImageLike,
+    LandmarkBackend,
+    Rejected,
+    as_rgb,
+    make_result,
+)
+from phonestereo.features.landmarks.eyes import mediapipe_eyes
+from phonestereo.features.landmarks.pose import MAX_YAW_RAD, yaw_from_landmarks
+
+Box = tuple[float, float, float, float, float]  # x0, y0, x1, y1 (pixels), score
+
+
+def _solutions() -> Any:
+    """``mediapipe.solutions`` (imported lazily: it is slow to import and logs to stderr)."""
+    import mediapipe as mp
+
+    return mp.solutions
+
+
+def tile_grid(width: int, height: int, min_tile_px: int) -> list[tuple[int, int, int]]:
+    """Square search tiles (x0, y0, side) of an image: sides max(W, H) / 2^k ≥ min_tile_px.
+
+    Neighbouring tiles of one level overlap by about half a side, so every face smaller than
+    half a tile lies whole inside some tile. Tiles larger than the image are clipped to it.
+
+    >>> len(tile_grid(2000, 1500, 256))            # sides 2000, 1000, 500: 1 + 6 + 35 tiles
+    42
+    >>> tile_grid(300, 200, 256)
+    [(0, 0, 300)]
+    """
+    if width < 1 or height < 1 or min_tile_px < 1:
+        raise InputError(f"bad tile grid request: {width} × {height}, min tile {min_tile_px}")
+    out = []
+    side = max(width, height)
+    while True:
+        for y0 in _starts(height, side):
+            for x0 in _starts(width, side):
+                out.append((x0, y0, side))
+        side //= 2
+        if side < min_tile_px:
+            break
+    return out
+
+
+def _starts(length: int, side: int) -> list[int]:
+    span = length - side
+    if span <= 0:
+        return [0]
+    n = int(np.ceil(span / (side / 2))) + 1
+    return sorted({round(v) for v in np.linspace(0, span, n)})
+
+
+def nms(boxes: list[Box], iou_max: float = 0.3) -> list[Box]:
+    """Greedy non-maximum suppression (highest score first); a box that overlaps a kept box
+    by more than ``iou_max`` IoU or lies mostly (> 60 %) inside it is dropped.
+
+    >>> nms([(0, 0, 10, 10, 0.9), (1, 1, 11, 11, 0.8), (50, 50, 60, 60, 0.7)])
+    [(0, 0, 10, 10, 0.9), (50, 50, 60, 60, 0.7)]
+    """
+    kept: list[Box] = []
+    for b in sorted(boxes, key=lambda b: -b[4]):
+        area = (b[2] - b[0]) * (b[3] - b[1])
+        dup = False
+        for k in kept:
+            iw = min(b[2], k[2]) - max(b[0], k[0])
+            ih = min(b[3], k[3]) - max(b[1], k[1])
+            inter = max(iw, 0.0) * max(ih, 0.0)
+            union = area + (k[2] - k[0]) * (k[3] - k[1]) - inter
+            if inter > iou_max * union or inter > 0.6 * area:
+                dup = True
+                break
+        if not dup:
+            kept.append(b)
+    return kept
+
+
+@dataclass(frozen=True)
+class MediaPipeBackend(LandmarkBackend):
+    """Faces, pupils and yaw with MediaPipe Face Mesh (iris landmarks), any face size.
+
+    Parameters
+    ----------
+    min_detection_confidence : float
+        Face-detector score threshold in (0, 1).
+    min_tile_px : int
+        Smallest search tile side, pixels. The full-range detector finds faces down to about
+        6 % of a tile; the smallest tile side is the first of max(W, H) / 2^k at or above
+        ``min_tile_px`` (500 px for a 2000-px image: faces from ~30 px wide, IPD ~13 px).
+    crop_scale : float
+        Side of the landmark crop relative to the detected face box.
+    crop_px : (int, int)
+        Range of the crop side after resampling, pixels (small faces are upsampled).
+    max_faces : int
+        At most this many candidates get landmarks (highest detector score first).
+    max_yaw_rad : float
+        Faces turned further are rejected as profiles.
+    min_ipd_px : float
+        Faces with a smaller pixel IPD are rejected as too small to measure.
+    mirror_average : bool
+        Also run Face Mesh on the mirrored crop and average pupils, eye centres and yaw
+        (halves the network's left/right bias: mirrored images give the same IPD).
+    quarter_turns : tuple of int
+        Also search the image turned by these many quarter turns counter-clockwise (MediaPipe
+        misses faces rolled by more than ~45°); ``(0, 1, 2, 3)`` for any orientation, at 4×
+        the time. Results are in the original image's pixels.
+
+    Examples
+    --------
+    >>> res = MediaPipeBackend().detect(np.full((240, 320), 128, np.uint8))   # blank image
+    >>> res.found, res.reason
+    (False, 'no face found (1 tile(s) of 320 px searched)')
+    """
+
+    min_detection_confidence: float = 0.5
+    min_tile_px: int = 256
+    crop_scale: float = 2.2
+    crop_px: tuple[int, int] = (256, 768)
+    max_faces: int = 64
+    max_yaw_rad: float = MAX_YAW_RAD
+    min_ipd_px: float = 8.0
+    mirror_average: bool = True
+    quarter_turns: tuple[int, ...] = (0,)
+    name: str = "mediapipe"
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_detection_confidence < 1:
+            raise InputError(
+                f"min_detection_confidence must be in (0, 1), got {self.min_detection_confidence}"
+            )
+        if self.min_tile_px < 64:
+            raise InputError(f"min_tile_px must be >= 64, got {self.min_tile_px}")
+        if self.crop_scale < 1.2:
+            raise InputError(f"crop_scale must be >= 1.2 (whole face), got {self.crop_scale}")
+        lo, hi = self.crop_px
+        if not 128 <= lo <= hi:
+            raise InputError(f"crop_px must be (lo, hi) with 128 <= lo <= hi, got {self.crop_px}")
+        if not self.quarter_turns or any(k not in (0, 1, 2, 3) for k in self.quarter_turns):
+            raise InputError(f"quarter_turns must be values in 0..3, got {self.quarter_turns}")
+        if self.max_faces < 1:
+            raise InputError(f"max_faces must be >= 1, got {self.max_faces}")
+
+    @contextlib.contextmanager
+    def _models(self) -> Iterator[tuple[Any, Any]]:
+        sol = _solutions()
+        with (
+            sol.face_detection.FaceDetection(
+                model_selection=1, min_detection_confidence=self.min_detection_confidence
+            ) as det,
+            sol.face_mesh.FaceMesh(
+                static_image_mode=True,
+                max_num_faces=3,
+                refine_landmarks=True,
+                min_detection_confidence=0.3,
+            ) as mesh,
+        ):
+            yield det, mesh
+
+    def detect(self, image: ImageLike) -> FaceResult:
+        """Faces of one image (array (H, W) gray / (H, W, 3) BGR uint8, or a path)."""
+        rgb = as_rgb(image)
+        with self._models() as (det, mesh):
+            return self._detect(rgb, det, mesh)
+
+    def detect_many(self, images: Iterable[ImageLike]) -> list[FaceResult]:
+        """Faces of each image, sharing one set of MediaPipe models."""
+        with self._models() as (det, mesh):
+            return [self._detect(as_rgb(im), det, mesh) for im in images]
+
+    def _detect(self, rgb: U8, det: Any, mesh: Any) -> FaceResult:
+        h, w = rgb.shape[:2]
+        faces: list[Face] = []
+        rejected: list[Rejected] = []
+        n_tiles, sides = 0, set()
+        for k in self.quarter_turns:
+            view = np.ascontiguousarray(np.rot90(rgb, k))
+            tiles = tile_grid(view.shape[1], view.shape[0], self.min_tile_px)
+            n_tiles += len(tiles)
+            sides |= {t[2] for t in tiles}
+            for box in nms(_find_boxes(view, tiles, det))[: self.max_faces]:
+                runs = [unrotate(r, k, (w, h)) for r in self._mesh(view, box, mesh)]
+                if not runs:
+                    corners = unrotate(np.array([box[:2], box[2:4]]), k, (w, h))
+                    lo, hi = corners.min(axis=0), corners.max(axis=0)
+                    why = "face detected but Face Mesh found no landmarks"
+                    rejected.append(Rejected((lo[0], lo[1], hi[0], hi[1]), why))
+                    continue
+                item = self._face(runs, box[4], (w, h))
+                if isinstance(item, Face):
+                    faces.append(item)
+                else:
+                    rejected.append(item)
+        faces = _dedupe(faces)
+        rejected = [r for r in rejected if not _covered(r, faces)]
+        searched = f"{n_tiles} tile(s) of {', '.join(str(s) for s in sorted(sides)[::-1])} px"
+        if len(self.quarter_turns) > 1:
+            searched += f" in {len(self.quarter_turns)} orientations"
+        return make_result(
+            faces,
+            (w, h),
+            self.name,
+            rejected=rejected,
+            empty_reason=f"no face found ({searched} searched)",
+        )
+
+    def _mesh(self, rgb: U8, box: Box, mesh: Any) -> list[F64]:
+        """Face Mesh on the crop around ``box`` and, with ``mirror_average``, on its mirror
+        image: per run that found the face, landmarks (478, 3) in image pixels (the mirrored
+        run's eye labels are swapped)."""
+        x0, y0, x1, y1 = box[:4]
+        side = max(round(self.crop_scale * max(x1 - x0, y1 - y0)), 16)
+        cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        X0, Y0 = round(cx - 0.5 * (side - 1)), round(cy - 0.5 * (side - 1))
+        crop = _crop(rgb, X0, Y0, side)
+        n = int(np.clip(side, *self.crop_px))
+        if n != side:
+            interp = cv2.INTER_AREA if n < side else cv2.INTER_CUBIC
+            crop = cv2.resize(crop, (n, n), interpolation=interp)
+        runs = []
+        for flip in (False, True) if self.mirror_average else (False,):
+            img = np.ascontiguousarray(crop[:, ::-1]) if flip else crop
+            xyz = _central_mesh(mesh.process(img))
+            if xyz is None:
+                continue
+            if flip:
+                xyz[:, 0] = 1.0 - xyz[:, 0]  # back into the crop's frame
+            x, y, z = (X0 - 0.5 + xyz[:, 0] * side, Y0 - 0.5 + xyz[:, 1] * side, xyz[:, 2] * side)
+            runs.append(np.column_stack([x, y, z]))
+        return runs
+
+    def _face(self, runs: list[F64], score: float, size: tuple[int, int]) -> Face | Rejected:
+        """A face from one or two mesh runs: pupils, eye centres and yaw averaged (each run's
+        face axis is oriented from eye 0 to eye 1, so a mirrored run's swapped labels cancel)."""
+        pts = runs[0]
+        eyes = [mediapipe_eyes(r) for r in runs]
+        pupils = np.mean([e[0] for e in eyes], axis=0)
+        centres = np.mean([e[1] for e in eyes], axis=0)
+        toward = pupils[1] - pupils[0]
+        yaw = float(np.mean([yaw_from_landmarks(r, toward=toward) for r in runs]))
+        lo, hi = pts[:, :2].min(axis=0), pts[:, :2].max(axis=0)
+        box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        w, h = size
+        inside = (pupils >= -0.5).all(axis=1) & (pupils <= [w - 0.5, h - 0.5]).all(axis=1)
+        ipd = float(np.linalg.norm(pupils[1] - pupils[0]))
+        if not inside.all():
+            return Rejected(box, "one eye outside the image (face cut by the border)")
+        if abs(yaw) > self.max_yaw_rad:
+            return Rejected(
+                box,
+                f"profile face (yaw {np.degrees(yaw):+.0f}°, limit "
+                f"±{np.degrees(self.max_yaw_rad):.0f}°): the far eye is not measurable",
+            )
+        if ipd < self.min_ipd_px:
+            return Rejected(box, f"face too small (ipd {ipd:.1f} px < {self.min_ipd_px:g} px)")
+        return Face(pupils, centres, pts[:, :2], yaw, score, np.array(box))
+
+
+def unrotate(points: F64, k: int, size: tuple[int, int]) -> F64:
+    """Pixels (N, 2|3) of ``np.rot90(image, k)`` → pixels of ``image`` (W, H = ``size``).
+
+    One counter-clockwise quarter turn maps image pixel (x, y) to (y, W − 1 − x); this undoes
+    ``k`` of them (extra columns such as z are kept: an in-plane turn leaves the yaw alone).
+
+    >>> img = np.arange(12).reshape(3, 4)                       # W = 4, H = 3
+    >>> x, y = unrotate(np.array([[2.0, 1.0]]), 1, (4, 3))[0]   # pixel (2, 1) of rot90(img)
+    >>> (x, y), int(np.rot90(img)[1, 2]) == int(img[int(y), int(x)])
+    ((2.0, 2.0), True)
+    """
+    out = np.array(points, dtype=np.float64)
+    w, h = size
+    for j in range(k % 4, 0, -1):
+        w_prev = w if (j - 1) % 2 == 0 else h
+        x, y = out[:, 0].copy(), out[:, 1].copy()
+        out[:, 0], out[:, 1] = w_prev - 1 - y, x
+    return out
+
+
+def _central_mesh(res: Any) -> F64 | None:
+    """Normalised landmarks (478, 3) of the mesh nearest the crop centre, or None."""
+    best, best_d = None, np.inf
+    for lm in res.multi_face_landmarks or ():
+        xyz = np.array([(p.x, p.y, p.z) for p in lm.landmark], dtype=np.float64)
+        d = float(np.hypot(*(xyz[:, :2].mean(axis=0) - 0.5)))
+        if d < best_d:
+            best, best_d = xyz, d
+    return best
+
+
+def _find_boxes(rgb: U8, tiles: list[tuple[int, int, int]], det: Any) -> list[Box]:
+    """Face-detector boxes over all tiles, in full-image pixels (x0, y0, x1, y1, score)."""
+    out: list[Box] = []
+    for x0, y0, side in tiles:
+        tile = np.ascontiguousarray(rgb[y0 : y0 + side, x0 : x0 + side])
+        th, tw = tile.shape[:2]
+        res = det.process(tile)
+        for d in res.detections or ():
+            b = d.location_data.relative_bounding_box
+            bx0 = x0 - 0.5 + b.xmin * tw
+            by0 = y0 - 0.5 + b.ymin * th
+            bx1, by1 = bx0 + b.width * tw, by0 + b.height * th
+            if bx1 - bx0 < 4 or by1 - by0 < 4:
+                continue
+            out.append((bx0, by0, bx1, by1, float(d.score[0])))
+    return out
+
+
+def _crop(rgb: U8, X0: int, Y0: int, side: int) -> U8:
+    """The square ``side`` × ``side`` crop starting at pixel (X0, Y0), black past the border."""
+    h, w = rgb.shape[:2]
+    out = np.zeros((side, side, 3), dtype=np.uint8)
+    xa, ya, xb, yb = max(X0, 0), max(Y0, 0), min(X0 + side, w), min(Y0 + side, h)
+    if xb > xa and yb > ya:
+        out[ya - Y0 : yb - Y0, xa - X0 : xb - X0] = rgb[ya:yb, xa:xb]
+    return out
+
+
+def _dedupe(faces: list[Face]) -> list[Face]:
+    """Drop faces whose pupil midpoint is within half an IPD of a higher-scoring one."""
+    kept: list[Face] = []
+    for f in sorted(faces, key=lambda f: -f.score):
+        if all(np.linalg.norm(f.midpoint_px - k.midpoint_px) > 0.5 * k.ipd_px for k in kept):
+            kept.append(f)
+    return kept
+
+
+def _covered(r: Rejected, faces: list[Face]) -> bool:
+    """True when a rejected candidate's box holds an accepted face's pupils (a duplicate)."""
+    x0, y0, x1, y1 = r.box_px
+    for f in faces:
+        mx, my = f.midpoint_px
+        if x0 <= mx <= x1 and y0 <= my <= y1:
+            return True
+    return False
