@@ -12,6 +12,7 @@ from phonestereo.cli import demo as _demo  # noqa: F401
 from phonestereo.cli import detect as _detect  # noqa: F401
 from phonestereo.cli import faces as _faces  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401
+from phonestereo.cli import learn as _learn  # noqa: F401
 from phonestereo.cli import match as _match  # noqa: F401
 from phonestereo.cli import rectify as _rectify  # noqa: F401
 from phonestereo.cli import simulate as _simulate  # noqa: F401

@@ -1,0 +1,399 @@
+"""Landmark disparity: a face's disparity at its eyes, with its IPD depth (thesis §4.1.3, §3.6).
+
+The learning flow's "landmark disparity estimation" block (Fig. 4-3, 4-4):
+
+1. landmarks of each face in the wide and in the raw tele image (the tele sees faces ×zoom
+   larger), their pupils mapped into the rectified frame (``canonical`` mode, §3.3);
+2. the depth of each wide face from its IPD (eq. 11: :func:`~phonestereo.learning.ipd.
+   fit_face_plane` for a printed chart, :func:`~phonestereo.learning.ipd.face_depth` for real
+   heads) and the disparity it predicts, ``d_expected = f·B/Z`` (eq. 4, Z along the rectified
+   axis);
+3. wide ↔ tele faces matched by the landmark disparity: the non-disparity error ``e`` of the
+   pupils must be small and their disparity near ``d_expected`` (a gate loose enough for the
+   naive calibration's ~30 % error, tight enough to separate faces);
+4. the disparity refined around both pupils ("peak refinement"): a grid of windows over each eye
+   region of the rectified wide image, integer NCC search in the rectified tele image
+   (:func:`~phonestereo.features.search.ncc_search`) then Lucas–Kanade sub-pixel refinement
+   (:func:`~phonestereo.features.subpixel.refine_lk`) with the Cramér–Rao σ per window
+   (:func:`~phonestereo.features.crlb.match_sigma`); their robust weighted mean is the face's d.
+
+A face that cannot be measured (no tele partner, no converged window) is listed with its reason,
+never dropped silently.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from phonestereo.errors import InputError
+from phonestereo.features.crlb import match_sigma, noise_sigma
+from phonestereo.features.landmarks.base import FaceResult
+from phonestereo.features.search import ncc_search
+from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
+from phonestereo.learning.ipd import IPD_M, face_depth, fit_face_plane
+from phonestereo.rectification import Rectification
+
+F64 = NDArray[np.float64]
+F32 = NDArray[np.float32]
+DepthMode = Literal["chart", "face"]
+
+
+@dataclass(frozen=True)
+class FaceDisparity:
+    """One wide face matched into the tele, its refined disparity and its IPD depth.
+
+    Attributes
+    ----------
+    wide_index, tele_index : int
+        Indices of the face in the wide and tele :class:`FaceResult`.
+    x_px, y_px : float
+        Pupil midpoint in the rectified wide image, pixels.
+    d_px, sigma_d_px : float
+        Refined disparity at the pupil midpoint and its standard deviation, pixels.
+    e_px : float
+        Refined non-disparity error (median over windows), pixels.
+    d_landmark_px, e_landmark_px : float
+        The same from the pupil landmarks alone (the matching step), pixels.
+    depth_ipd_m : float
+        Z of the pupil midpoint from the IPD (eq. 11), along the rectified axis, metres.
+    d_expected_px : float
+        ``f·B / depth_ipd_m`` (eq. 4), pixels.
+    n_windows : int
+        Windows that converged and survived the outlier test.
+    zncc : float
+        Median ZNCC of those windows at the solution.
+    """
+
+    wide_index: int
+    tele_index: int
+    x_px: float
+    y_px: float
+    d_px: float
+    sigma_d_px: float
+    e_px: float
+    d_landmark_px: float
+    e_landmark_px: float
+    depth_ipd_m: float
+    d_expected_px: float
+    n_windows: int
+    zncc: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly record (floats rounded to 1e-4)."""
+        return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in vars(self).items()}
+
+
+@dataclass(frozen=True)
+class LandmarkDisparityResult:
+    """The measured faces of one capture; ``reason`` says why there are none.
+
+    ``unmatched`` holds ``(wide_index, reason)`` for every wide face not measured.
+    """
+
+    faces: tuple[FaceDisparity, ...]
+    n_wide: int
+    n_tele: int
+    reason: str = ""
+    unmatched: tuple[tuple[int, str], ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.faces)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly summary."""
+        return {
+            "n_wide": self.n_wide,
+            "n_tele": self.n_tele,
+            "reason": self.reason,
+            "faces": [f.to_dict() for f in self.faces],
+            "unmatched": [{"wide_index": i, "reason": r} for i, r in self.unmatched],
+        }
+
+
+def _pupils(res: FaceResult) -> F64:
+    return np.array([f.pupils_px for f in res.faces], dtype=np.float64).reshape(-1, 2, 2)
+
+
+def ipd_depths(
+    faces: FaceResult, rect: Rectification, ipd_m: float = IPD_M, mode: DepthMode = "chart"
+) -> tuple[F64, F64]:
+    """IPD depth of each wide face along the rectified axis and its expected disparity.
+
+    Parameters
+    ----------
+    faces : FaceResult
+        Faces of the raw wide image.
+    rect : Rectification
+        The rectification (``canonical`` makes f·B/Z exact).
+    ipd_m : float
+        The IPD, metres.
+    mode : {"chart", "face"}
+        ``"chart"``: all faces on one printed plane (:func:`fit_face_plane`, the chart's tilt
+        instead of the portraits' head yaw); ``"face"``: real heads, each with its own yaw
+        (:func:`face_depth`).
+
+    Returns
+    -------
+    depth_m, d_expected_px : ndarray, shape (N,)
+        Metres and pixels; NaN where the pupils leave the camera's valid field.
+    """
+    pupils = _pupils(faces)
+    if len(pupils) == 0:
+        return np.zeros(0), np.zeros(0)
+    cam = rect.rig.wide
+    z = np.full(len(pupils), np.nan)
+    if mode == "chart":
+        try:
+            fit = fit_face_plane(pupils, cam, ipd_m)
+        except InputError:  # no pupil in the valid field: the per-face fallback says so (NaN)
+            fit = None
+        if fit is not None and not fit.reason:
+            z = np.asarray(fit.depth_m, dtype=np.float64)
+    elif mode != "face":
+        raise InputError(f"depth mode must be 'chart' or 'face', got {mode!r}")
+    bad = ~np.isfinite(z)
+    if bad.any():  # real heads (or a failed plane fit): each face on its own
+        yaw = np.array([f.yaw_rad if np.isfinite(f.yaw_rad) else 0.0 for f in faces.faces])
+        refs = np.array([f.yaw_reference for f in faces.faces])
+        for ref in ("sight", "image"):
+            sel = bad & (refs == ref)
+            if sel.any():
+                z[sel] = face_depth(pupils[sel], cam, ipd_m, yaw[sel], relative_to=ref)
+    mid = cam.unproject(pupils).mean(axis=1)  # (N, 3), z = 1: the pupil midpoint's ray
+    p_rect = (mid * z[:, None]) @ np.asarray(rect.R_rect_wide).T
+    z_rect = p_rect[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_exp = rect.f_px * rect.baseline_m / z_rect
+    return z_rect, np.where(z_rect > 0, d_exp, np.nan)
+
+
+def match_faces(
+    d: F64,
+    e: F64,
+    d_expected: F64,
+    *,
+    max_e_px: float = 10.0,
+    d_tol_px: float = 4.0,
+    d_tol_rel: float = 0.35,
+) -> list[tuple[int, int]]:
+    """Assign wide faces to tele faces by landmark (d, e) (one-to-one, gated).
+
+    Parameters
+    ----------
+    d, e : ndarray, shape (Nw, Nt)
+        Landmark disparity and non-disparity error of every wide/tele pair, pixels.
+    d_expected : ndarray, shape (Nw,)
+        f·B/Z_IPD of each wide face, pixels.
+    max_e_px, d_tol_px, d_tol_rel : float
+        Gates: |e| ≤ max_e_px and |d − d_expected| ≤ d_tol_px + d_tol_rel · d_expected.
+
+    Returns
+    -------
+    list of (wide_index, tele_index)
+
+    Examples
+    --------
+    Two faces 300 px apart, both at 12 px of disparity; the tele faces listed in reverse:
+
+    >>> d = np.array([[-288.0, 12.2], [11.8, 312.0]])
+    >>> match_faces(d, np.zeros((2, 2)), np.array([12.0, 12.0]))
+    [(0, 1), (1, 0)]
+    """
+    if d.size == 0:
+        return []
+    tol = d_tol_px + d_tol_rel * np.abs(d_expected)[:, None]
+    cost = (e / max_e_px) ** 2 + ((d - d_expected[:, None]) / tol) ** 2
+    ok = np.isfinite(cost) & (np.abs(e) <= max_e_px) & (np.abs(d - d_expected[:, None]) <= tol)
+    big = 1e6
+    rows, cols = linear_sum_assignment(np.where(ok, cost, big))
+    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if ok[i, j]]
+
+
+def _gray32(image: Any) -> F32:
+    a = np.asarray(image)
+    if a.ndim == 3:
+        a = a[..., :3].astype(np.float32) @ np.array([0.114, 0.587, 0.299], np.float32)
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+@dataclass(frozen=True)
+class _Rectified:
+    left: F32
+    left_coef: F32
+    right: F32
+    right_coef: F32
+    sigma_left: float
+    sigma_right: float
+
+
+def _prepare(rect: Rectification, image_wide: Any, image_tele: Any) -> _Rectified:
+    lw, rt = rect.remap(image_wide, image_tele)
+    left, right = _gray32(lw), _gray32(rt)
+    return _Rectified(
+        left,
+        bspline_coefficients(left),
+        right,
+        bspline_coefficients(right),
+        noise_sigma(left),
+        noise_sigma(right),
+    )
+
+
+def _refine_face(
+    img: _Rectified, pupils: F64, d0: float, e0: float, *, min_zncc: float
+) -> tuple[float, float, float, int, float]:
+    """(d, σ_d, e, n, zncc) of one face from windows around its rectified pupils (2, 2)."""
+    ipd = float(np.linalg.norm(pupils[1] - pupils[0]))
+    step = max(2, round(0.06 * ipd))
+    r = int(np.clip(round(0.12 * ipd), 6, 12))
+    k = np.arange(-2, 3) * step
+    grid = np.stack(np.meshgrid(k, k), axis=-1).reshape(-1, 2)
+    xy = np.rint(pupils[:, None, :] + grid[None]).reshape(-1, 2).astype(np.int64)
+    offset = (xy - pupils.mean(axis=0)).astype(np.float64)  # window centre − pupil midpoint
+    h, w = img.left.shape
+    m = r + PREFILTER_MARGIN
+    inside = (xy[:, 0] >= m) & (xy[:, 0] < w - m) & (xy[:, 1] >= m) & (xy[:, 1] < h - m)
+    xy, offset = xy[inside], offset[inside]
+    if len(xy) == 0:
+        return np.nan, np.nan, np.nan, 0, np.nan
+    lo, hi = int(np.floor(d0 - 4.0)), int(np.ceil(d0 + 4.0))
+    s = ncc_search(
+        img.left, img.right, xy, radius=r, min_d=lo, max_d=hi,
+        row_tolerance=int(np.ceil(abs(e0))) + 2,
+    )  # fmt: skip
+    ok = s.searched & ~s.at_edge & np.isfinite(s.d0)
+    if not ok.any():
+        return np.nan, np.nan, np.nan, 0, np.nan
+    xy, offset = xy[ok], offset[ok]
+    ref = refine_lk(
+        img.left, img.left_coef, img.right_coef, xy, s.d0[ok], s.e0[ok], radius=r, slant=False
+    )
+    sd, _, _ = match_sigma(
+        ref.cov_unit, ref.residual_var, ref.gain, img.sigma_left, img.sigma_right
+    )
+    good = ref.converged & (ref.zncc >= min_zncc) & np.isfinite(sd) & (sd > 0)
+    d, sd, e, z, off = ref.d[good], sd[good], ref.e[good], ref.zncc[good], offset[good]
+    for _ in range(3):  # robust: drop windows off the face's disparity (eyelashes, occlusions)
+        if len(d) < 3:
+            break
+        med = np.median(d)
+        mad = 1.4826 * np.median(np.abs(d - med))
+        keep = np.abs(d - med) <= np.maximum(3.0 * mad, 3.0 * sd) + 0.02
+        if keep.all():
+            break
+        d, sd, e, z, off = d[keep], sd[keep], e[keep], z[keep], off[keep]
+    if len(d) == 0:
+        return np.nan, np.nan, np.nan, 0, np.nan
+    wts = 1.0 / sd**2
+    # d at the pupil midpoint: a weighted plane d = a + b·Δx + c·Δy when both eyes are measured
+    # (a slanted face), else the weighted mean
+    design = np.column_stack([np.ones(len(d)), off]) if len(d) >= 6 else np.ones((len(d), 1))
+    sw = np.sqrt(wts)
+    coef, *_ = np.linalg.lstsq(design * sw[:, None], d * sw, rcond=None)
+    cov = np.linalg.pinv(design.T @ (design * wts[:, None]))
+    # overlapping windows share pixels: inflate by the number of windows covering each pixel
+    # (on rendered charts this makes (d − d_true) / σ_d ≈ 1 rms; without it ≈ 2.3)
+    overlap = max(1.0, ((2 * r + 1) / step) ** 2)
+    resid = d - design @ coef
+    scatter = float(np.sqrt(np.sum(wts * resid**2) / np.sum(wts) / max(len(d) - 1, 1)))
+    sigma = max(float(np.sqrt(cov[0, 0] * overlap)), scatter)
+    return float(coef[0]), sigma, float(np.median(e)), len(d), float(np.median(z))
+
+
+def landmark_disparity(
+    rect: Rectification,
+    image_wide: Any,
+    image_tele: Any,
+    faces_wide: FaceResult,
+    faces_tele: FaceResult,
+    *,
+    ipd_m: float = IPD_M,
+    depth_mode: DepthMode = "chart",
+    max_e_px: float = 10.0,
+    d_tol_px: float = 4.0,
+    d_tol_rel: float = 0.35,
+    min_zncc: float = 0.8,
+) -> LandmarkDisparityResult:
+    """Per-face disparity at the eyes and the disparity its IPD depth predicts (§4.1.3).
+
+    Parameters
+    ----------
+    rect : Rectification
+        Of the capture's calibration (``canonical`` mode recommended, §3.3).
+    image_wide, image_tele : ndarray, shape (H, W) or (H, W, 3), uint8
+        The raw images (as taken: the tele at its own zoom).
+    faces_wide, faces_tele : FaceResult
+        Landmarks of the raw wide and the raw tele image (e.g. ``MediaPipeBackend``).
+    ipd_m : float
+        True IPD, metres (63 mm for the face chart; a population mean for real faces).
+    depth_mode : {"chart", "face"}
+        See :func:`ipd_depths`.
+    max_e_px, d_tol_px, d_tol_rel : float
+        Matching gates, see :func:`match_faces`.
+    min_zncc : float
+        Windows below this ZNCC after refinement are not used.
+
+    Returns
+    -------
+    LandmarkDisparityResult
+        Faces with d, σ_d, e, the IPD depth and f·B/Z_IPD; ``reason`` when none was measured.
+    """
+    if not faces_wide.found:
+        return LandmarkDisparityResult((), 0, len(faces_tele), f"wide: {faces_wide.reason}")
+    if not faces_tele.found:
+        reason = f"tele: {faces_tele.reason}"
+        none = tuple((i, "no face in the tele") for i in range(len(faces_wide)))
+        return LandmarkDisparityResult((), len(faces_wide), 0, reason, none)
+    pw = rect.points_wide(_pupils(faces_wide))  # (Nw, 2, 2) rectified
+    pt = rect.points_tele(_pupils(faces_tele))  # (Nt, 2, 2)
+    diff = pw[:, None] - pt[None]  # (Nw, Nt, 2 pupils, 2)
+    d_lm, e_lm = diff[..., 0].mean(axis=2), diff[..., 1].mean(axis=2)
+    z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode)
+    pairs = match_faces(
+        d_lm, e_lm, d_exp, max_e_px=max_e_px, d_tol_px=d_tol_px, d_tol_rel=d_tol_rel
+    )
+    img = _prepare(rect, image_wide, image_tele) if pairs else None
+    out: list[FaceDisparity] = []
+    unmatched: list[tuple[int, str]] = []
+    matched = {i for i, _ in pairs}
+    for i in range(len(faces_wide)):
+        if i not in matched:
+            why = "no tele face within the e / expected-disparity gates (outside its view?)"
+            unmatched.append((i, why if np.isfinite(d_exp[i]) else "no IPD depth"))
+    for i, j in pairs:
+        assert img is not None
+        d, sd, e, n, zn = _refine_face(img, pw[i], d_lm[i, j], e_lm[i, j], min_zncc=min_zncc)
+        if n == 0:
+            unmatched.append((i, "no eye window converged in the tele (blur, occlusion, edge)"))
+            continue
+        mid = pw[i].mean(axis=0)
+        out.append(
+            FaceDisparity(
+                i,
+                j,
+                float(mid[0]),
+                float(mid[1]),
+                d,
+                sd,
+                e,
+                float(d_lm[i, j]),
+                float(e_lm[i, j]),
+                float(z[i]),
+                float(d_exp[i]),
+                n,
+                zn,
+            )
+        )
+    reason = (
+        ""
+        if out
+        else "no face measured in both cameras: " + "; ".join(sorted({r for _, r in unmatched}))
+    )
+    return LandmarkDisparityResult(
+        tuple(out), len(faces_wide), len(faces_tele), reason, tuple(sorted(unmatched))
+    )

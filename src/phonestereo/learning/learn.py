@@ -1,0 +1,288 @@
+"""The learning phase: face captures → disparity observations in the fix store (thesis §4.1.3).
+
+Per face capture (Fig. 4-3, 4-4): landmarks in the wide and the tele → IPD depth → landmark
+disparity (:func:`~phonestereo.learning.landmark_disparity.landmark_disparity`) → one
+:class:`~phonestereo.learning.observation.Observation` per measured face (sensor position = the
+face's rectified wide pupil midpoint, measured and expected disparity, depth, orientation
+bucket, focus group, time, temperature) → one :meth:`FixStore.add_capture` per capture.
+Captures without usable faces are skipped with the reason (and not written to the store).
+
+Not (yet) in this flow: the heating gate, the focus calibration of refocus stacks and the W-T
+scale (§3.5); observations are learned on the calibration as given.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
+from phonestereo.io import (
+    Calibration,
+    CaptureEntry,
+    CaptureSet,
+    load_calibration,
+    load_capture_set,
+    read_gray,
+)
+from phonestereo.learning.ipd import IPD_M, IpdPrior
+from phonestereo.learning.landmark_disparity import (
+    DepthMode,
+    LandmarkDisparityResult,
+    landmark_disparity,
+)
+from phonestereo.learning.observation import Observation
+from phonestereo.learning.store import FixStore
+from phonestereo.rectification import Rectification
+
+#: Progress callback: ``progress(done, total, capture_id)``.
+Progress = Callable[[int, int, str], None]
+
+
+def orientation_bucket(gravity: Any) -> str:
+    """Orientation label from the device-frame gravity vector (§3.4): its dominant axis.
+
+    Device frame as the camera's: x right, y down, z forward (DESIGN §5), so gravity (0, 1, 0)
+    is the device held in landscape.
+
+    >>> orientation_bucket([0.01, 0.999, 0.02]), orientation_bucket([0.0, -1.0, 0.0])
+    ('landscape', 'landscape-flipped')
+    >>> orientation_bucket([-0.9, 0.1, 0.3])
+    'portrait-x-'
+    """
+    g = np.asarray(gravity, dtype=np.float64).reshape(-1)
+    if g.shape != (3,) or not np.isfinite(g).all() or not np.any(g):
+        raise InputError(f"gravity must be a finite non-zero 3-vector, got {gravity!r}")
+    k = int(np.argmax(np.abs(g)))
+    positive = g[k] > 0
+    names = (
+        ("portrait-x+", "portrait-x-"),
+        ("landscape", "landscape-flipped"),
+        ("pointing-down", "pointing-up"),
+    )
+    return names[k][0 if positive else 1]
+
+
+def capture_orientation(entry: CaptureEntry) -> str:
+    """The capture's orientation label, else its gravity bucket, else ``"unknown"``."""
+    if entry.orientation:
+        return str(entry.orientation)
+    if entry.gravity is not None:
+        return orientation_bucket(entry.gravity)
+    return "unknown"
+
+
+@dataclass(frozen=True)
+class LearnResult:
+    """What one capture gave: observations, the face measurement, or why it was skipped.
+
+    ``timing_s`` holds ``detect`` (landmarks, both images), ``disparity`` and ``total``.
+    """
+
+    capture_id: str
+    observations: tuple[Observation, ...]
+    disparity: LandmarkDisparityResult | None
+    reason: str = ""
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when at least one observation was learned."""
+        return len(self.observations) > 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly record."""
+        return {
+            "capture_id": self.capture_id,
+            "n_observations": len(self.observations),
+            "reason": self.reason,
+            "timing_s": {k: round(v, 4) for k, v in self.timing_s.items()},
+            "faces": [] if self.disparity is None else [f.to_dict() for f in self.disparity.faces],
+        }
+
+
+def learn_capture(
+    capture_set: CaptureSet,
+    capture_id: str,
+    rect: Rectification,
+    *,
+    ipd_m: float = IPD_M,
+    source: str = "face-chart",
+    depth_mode: DepthMode = "chart",
+    backend: LandmarkBackend | None = None,
+) -> LearnResult:
+    """Learn the disparity observations of one face capture.
+
+    Parameters
+    ----------
+    capture_set : CaptureSet
+        The loaded capture set.
+    capture_id : str
+        Which capture.
+    rect : Rectification
+        Of the calibration (``canonical``).
+    ipd_m : float
+        IPD, metres (the chart's 63 mm, or a population mean).
+    source : str
+        Recorded as the observations' ``source`` (``"face-chart"`` / ``"population"``).
+    depth_mode : {"chart", "face"}
+        One printed plane of faces, or real heads (see
+        :func:`~phonestereo.learning.landmark_disparity.ipd_depths`).
+    backend : LandmarkBackend, optional
+        Default: :class:`MediaPipeBackend`.
+
+    Returns
+    -------
+    LearnResult
+        Observations (one per face measured in both cameras) or the reason there are none.
+    """
+    t0 = time.perf_counter()
+    entry = capture_set.get(capture_id)
+    path_w, path_t = capture_set.image_paths(capture_id)
+    img_w, img_t = read_gray(path_w), read_gray(path_t)
+    det = backend if backend is not None else MediaPipeBackend()
+    faces_w, faces_t = det.detect_many([img_w, img_t])
+    t1 = time.perf_counter()
+    res = landmark_disparity(
+        rect, img_w, img_t, faces_w, faces_t, ipd_m=ipd_m, depth_mode=depth_mode
+    )
+    t2 = time.perf_counter()
+    timing = {"detect": t1 - t0, "disparity": t2 - t1, "total": t2 - t0}
+    orientation = capture_orientation(entry)
+    obs = []
+    for f in res.faces:
+        if not (np.isfinite(f.d_px) and np.isfinite(f.d_expected_px) and f.depth_ipd_m > 0):
+            continue
+        obs.append(
+            Observation(
+                x_px=f.x_px,
+                y_px=f.y_px,
+                d_measured_px=f.d_px,
+                d_expected_px=f.d_expected_px,
+                depth_m=f.depth_ipd_m,
+                orientation=orientation,
+                focus_group=entry.focus_group,
+                time_s=entry.time_s,
+                temperature_c=entry.temperature_c,
+                capture_id=entry.id,
+                source=source,
+                sigma_px=f.sigma_d_px,
+            )
+        )
+    reason = "" if obs else (res.reason or "no face measured")
+    return LearnResult(entry.id, tuple(obs), res, reason, timing)
+
+
+@dataclass(frozen=True)
+class LearnSummary:
+    """The learning of a capture set: per-capture results and what went into the store."""
+
+    store_path: Path
+    results: tuple[LearnResult, ...]
+    skipped: tuple[tuple[str, str], ...]
+    n_observations: int
+    elapsed_s: float
+
+    @property
+    def seconds_per_capture(self) -> float:
+        """Mean wall time per face capture processed, seconds."""
+        n = len(self.results)
+        return float(np.mean([r.timing_s.get("total", np.nan) for r in self.results])) if n else 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-friendly summary."""
+        return {
+            "store": str(self.store_path),
+            "n_captures": len(self.results),
+            "n_learned": sum(r.ok for r in self.results),
+            "n_observations": self.n_observations,
+            "skipped": [{"capture_id": c, "reason": r} for c, r in self.skipped],
+            "elapsed_s": round(self.elapsed_s, 3),
+            "seconds_per_capture": round(self.seconds_per_capture, 4),
+            "captures": [r.to_dict() for r in self.results],
+        }
+
+
+def learn_capture_set(
+    folder: str | os.PathLike[str] | CaptureSet,
+    calibration: str | os.PathLike[str] | Calibration,
+    store: str | os.PathLike[str] | FixStore,
+    *,
+    ipd_mm: float = 63.0,
+    population: IpdPrior | bool | None = None,
+    backend: LandmarkBackend | None = None,
+    progress: Progress | None = None,
+) -> LearnSummary:
+    """Learn every face capture of a capture set into a fix store.
+
+    Parameters
+    ----------
+    folder : path or CaptureSet
+        The capture set.
+    calibration : path or Calibration
+        The calibration to learn on (e.g. the capture set's factory ``calibration.json``).
+    store : path or FixStore
+        The fix store (created when absent); each capture is one transaction.
+    ipd_mm : float
+        The face chart's printed IPD, millimetres (face-chart mode: all faces on one plane).
+    population : IpdPrior or bool, optional
+        Real faces of unknown IPD: their depths use the prior's mean IPD (``True``: the
+        thesis's §3.6 sexes prior) and each head's own yaw; overrides ``ipd_mm``.
+    backend : LandmarkBackend, optional
+        Default: one :class:`MediaPipeBackend`.
+    progress : callable, optional
+        ``progress(done, total, capture_id)`` after each face capture.
+
+    Returns
+    -------
+    LearnSummary
+
+    Raises
+    ------
+    InputError
+        Unreadable capture set or calibration, a non-positive IPD, no face captures.
+    """
+    t0 = time.perf_counter()
+    cs = folder if isinstance(folder, CaptureSet) else load_capture_set(folder)
+    cal = calibration if isinstance(calibration, Calibration) else load_calibration(calibration)
+    mode: DepthMode
+    if population is True:
+        population = IpdPrior.population()
+    if isinstance(population, IpdPrior):
+        ipd_m, source, mode = population.mean_m, "population", "face"
+    else:
+        if not 30.0 < float(ipd_mm) < 100.0:
+            raise InputError(f"--ipd-mm must be an adult IPD in millimetres (30–100), got {ipd_mm}")
+        ipd_m, source, mode = float(ipd_mm) / 1000.0, "face-chart", "chart"
+    faces = [c for c in cs.captures() if c.kind == "face"]
+    if not faces:
+        raise InputError(
+            f"capture set {cs.root} has no captures of kind 'face'; learning needs face captures"
+        )
+    rect = Rectification.from_rig(cal.rig, "canonical")
+    det = backend if backend is not None else MediaPipeBackend()
+    fs = store if isinstance(store, FixStore) else FixStore(store)
+    results, skipped, n_obs = [], [], 0
+    try:
+        for k, entry in enumerate(faces):
+            res = learn_capture(
+                cs, entry.id, rect, ipd_m=ipd_m, source=source, depth_mode=mode, backend=det
+            )
+            results.append(res)
+            if res.ok:
+                n_obs += fs.add_capture(entry.id, list(res.observations))
+            else:
+                skipped.append((entry.id, res.reason))
+            if progress is not None:
+                progress(k + 1, len(faces), entry.id)
+    finally:
+        if not isinstance(store, FixStore):
+            fs.close()
+    return LearnSummary(fs.path, tuple(results), tuple(skipped), n_obs, time.perf_counter() - t0)
