@@ -6,7 +6,8 @@ builds the whole app.
 
 from __future__ import annotations
 
-from phonestereo.cli import calibrate as _calibrate  # noqa: F401  (registers commands)
+from phonestereo.cli import analyze as _analyze  # noqa: F401  (registers commands)
+from phonestereo.cli import calibrate as _calibrate  # noqa: F401
 from phonestereo.cli import charts as _charts  # noqa: F401
 from phonestereo.cli import demo as _demo  # noqa: F401
 from phonestereo.cli import detect as _detect  # noqa: F401

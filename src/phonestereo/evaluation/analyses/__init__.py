@@ -1,0 +1,117 @@
+"""The chapter-3 analyses (thesis §3.1–§3.6): each reads a capture set, writes figures and a table.
+
+Every analysis is registered in :data:`ANALYSES` under its name, with what it needs from a
+capture set and a ``run(capture_set, out_dir)`` that returns an :class:`AnalysisOutput`. The
+``phonestereo analyze NAME CAPTURE_SET --out DIR`` command is a thin wrapper over
+:func:`run_analysis`; adding an analysis is one module plus one registry entry. The modules
+are imported only when run (Matplotlib is slow to import).
+
+Examples
+--------
+>>> sorted(ANALYSES)
+['heating']
+>>> ANALYSES["heating"].summary
+'warm-up drift of the disparity: fit A, τ, saturation time; warm-up gate (§3.1)'
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from phonestereo.errors import InputError
+
+Progress = Callable[[int, int, str], None]
+
+
+@dataclass(frozen=True)
+class AnalysisOutput:
+    """What an analysis produced.
+
+    Attributes
+    ----------
+    name : str
+        The analysis name.
+    ok : bool
+        False when the data could not give the result (the reason says why).
+    reason : str
+        Why not ok, or notes.
+    summary : tuple of str
+        Human-readable lines (the CLI prints them).
+    table : dict
+        The JSON table written next to the figures (``<name>.json``).
+    files : tuple of Path
+        Every file written (figures and the table).
+    """
+
+    name: str
+    ok: bool
+    reason: str
+    summary: tuple[str, ...]
+    table: dict[str, Any]
+    files: tuple[Path, ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class AnalysisSpec:
+    """A registered analysis: name, one-line summary, what it needs, and where its runner is.
+
+    ``runner`` is ``"module:function"``; the function is called as
+    ``function(capture_set_path, out_dir, progress=None)`` and returns an
+    :class:`AnalysisOutput`; ``progress(done, total, capture_id)`` is called per capture.
+    """
+
+    name: str
+    summary: str
+    needs: str
+    runner: str
+
+    def load(self) -> Callable[..., AnalysisOutput]:
+        """Import and return the runner function."""
+        module, func = self.runner.split(":")
+        fn: Callable[..., AnalysisOutput] = getattr(importlib.import_module(module), func)
+        return fn
+
+
+ANALYSES: dict[str, AnalysisSpec] = {
+    "heating": AnalysisSpec(
+        "heating",
+        "warm-up drift of the disparity: fit A, τ, saturation time; warm-up gate (§3.1)",
+        "a static verification chart on a tripod, focus locked, captured from cold every "
+        "~10 s for several minutes (>= 4 'verification' captures at distinct time_s), e.g. "
+        "`phonestereo simulate heating`",
+        "phonestereo.evaluation.analyses.heating:run",
+    ),
+}
+
+
+def run_analysis(
+    name: str,
+    capture_set: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    progress: Progress | None = None,
+) -> AnalysisOutput:
+    """Run the analysis ``name`` on a capture set, writing its figures and table into ``out_dir``.
+
+    Raises
+    ------
+    InputError
+        Unknown analysis (the message lists the known ones), an invalid capture set, or a set
+        lacking the captures the analysis needs (the message names them).
+    """
+    if name not in ANALYSES:
+        known = ", ".join(f"{k} ({v.summary})" for k, v in ANALYSES.items())
+        raise InputError(f"unknown analysis {name!r}; known analyses: {known}")
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} exists and is not a folder; choose another folder")
+    out.mkdir(parents=True, exist_ok=True)
+    return ANALYSES[name].load()(Path(capture_set), out, progress=progress)
+
+
+__all__ = ["ANALYSES", "AnalysisOutput", "AnalysisSpec", "run_analysis"]
