@@ -26,6 +26,8 @@ QUICK_COUNTS = {
     "learning": 4,
     "verification": 4,
     "thesis-bench": 8,
+    "calibration": 6,
+    "calibration-3plane": 1,
 }
 
 

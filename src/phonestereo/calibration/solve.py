@@ -65,6 +65,8 @@ class CalibrationResult:
         Covariance = σ² (JᵀJ)⁻¹ over the inliers, σ the fitted per-coordinate noise.
     residuals : ndarray, shape (M, 2)
         Predicted − observed pixels for every observed point.
+    image_points : ndarray, shape (M, 2)
+        The observed pixels (x, y) themselves, in the same order (for residual plots).
     camera_index, view_index, ids : ndarray, shape (M,)
     inliers : ndarray of bool, shape (M,)
     rms_px_per_point : float
@@ -82,6 +84,7 @@ class CalibrationResult:
     parameters: np.ndarray
     covariance: np.ndarray
     residuals: np.ndarray
+    image_points: np.ndarray
     camera_index: np.ndarray
     view_index: np.ndarray
     ids: np.ndarray
@@ -236,6 +239,7 @@ def _finish(
         parameters=x,
         covariance=cov,
         residuals=res_all,
+        image_points=obs.image_points,
         camera_index=obs.camera,
         view_index=obs.view,
         ids=obs.ids,
@@ -255,7 +259,8 @@ def _check_views(views: Sequence[BoardView], size: tuple[int, int], n_intr: int,
     if len(views) == 0:
         raise InputError(f"{who}: no board views; check the image glob and the board size")
     need = max(3, int(np.ceil((n_intr + 6 * len(views)) / 2 / 4)))
-    if len(views) < 2 and n_intr > 4:
+    planar = all(np.ptp(v.object_points[:, 2]) < 1e-12 for v in views)
+    if len(views) < 2 and n_intr > 4 and planar:
         raise InputError(
             f"{who}: {len(views)} view(s) cannot constrain {n_intr} intrinsics; "
             "take at least 3 views of the board at different tilts (or use the three-plane chart)"

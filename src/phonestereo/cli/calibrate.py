@@ -17,6 +17,7 @@ from phonestereo.cli.app import app
 from phonestereo.errors import InputError
 from phonestereo.geometry import LENS_MODELS, Rig
 from phonestereo.io import Calibration, save_calibration
+from phonestereo.report.calibration_plots import write_residual_plots
 
 
 @app.command()
@@ -42,12 +43,20 @@ def calibrate(
         ),
     ] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+    plots: Annotated[
+        Path | None,
+        typer.Option(
+            help="Folder for residual plots: per camera, residual vectors over the image "
+            "(inliers / outliers) and residual vs radius (residuals_<camera>.png)."
+        ),
+    ] = None,
 ) -> None:
     """Calibrate one camera, or the wide + tele pair, from images of a plain chessboard.
 
     Corners: OpenCV's detector orders the board, a saddle-point fit refines every corner.
     Solve: nonlinear least squares with an analytic sparse Jacobian; RMS is reported per point
-    (as OpenCV does) and per coordinate (as mrcal does), with outliers and the covariance.
+    (as OpenCV does) and per coordinate (as mrcal does), with outliers and the covariance;
+    ``--plots DIR`` draws the residuals of every camera.
     """
     console = Console(stderr=True)
     if model not in LENS_MODELS:
@@ -87,6 +96,13 @@ def calibrate(
             )
             + "\n"
         )
+    plot_paths: list[str] = []
+    if plots is not None:
+        try:
+            plot_paths = [str(p) for p in write_residual_plots(result, plots)]
+        except InputError as exc:
+            console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
+            raise typer.Exit(2) from exc
     summary = {
         "rms_px_per_point": result.rms_px_per_point,
         "rms_px_per_coordinate": result.rms_px_per_coordinate,
@@ -99,6 +115,7 @@ def calibrate(
         "T_tele_wide": result.T_tele_wide.to_dict() if result.T_tele_wide else None,
         "std": {n: result.std[n] for n in names},
         "out": str(out),
+        "plots": plot_paths,
     }
     if as_json:
         typer.echo(json.dumps(summary))
@@ -118,6 +135,8 @@ def calibrate(
     if result.T_tele_wide is not None:
         table.add_row("baseline |t|", f"{result.T_tele_wide.t.tolist()}")
     table.add_row("solve time", f"{result.seconds:.2f} s")
+    for path in plot_paths:
+        table.add_row("residual plot", path)
     Console().print(table)
     for r in reports:
         if not r.found:

@@ -16,6 +16,9 @@ landscape; charts face the device.
 ``verification`` verification chart at 0.8–4 m, handheld, heated, each a 5-attempt stack
                  with an ROI (§4.1.3)
 ``thesis-bench`` learning + verification on one phone (DESIGN §10)
+``calibration``  tripod, focus locked, heated: a chessboard in many poses, or one shot of
+                 the three-plane chart, also named ``calibration-3plane`` (§1.3.2;
+                 :mod:`~phonestereo.sim.calib_scenario`)
 =============== ========================================================================
 """
 
@@ -30,6 +33,11 @@ import numpy as np
 from phonestereo.charts.faces import FaceChart
 from phonestereo.charts.verification import VerificationChart
 from phonestereo.errors import InputError
+from phonestereo.sim.calib_scenario import (
+    CalibrationConfig,
+    ThreePlaneCalibrationConfig,
+    plan_calibration,
+)
 from phonestereo.sim.capture import CaptureConditions
 from phonestereo.sim.module import ModuleSpec
 from phonestereo.sim.plan import (
@@ -317,6 +325,10 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("learning", LearningConfig, plan_learning, "face chart at 1-3 m, stacks"),
         Scenario("verification", VerificationConfig, plan_verification, "chart at 0.8-4 m"),
         Scenario("thesis-bench", BenchConfig, plan_thesis_bench, "learning + verification"),
+        Scenario("calibration", CalibrationConfig, plan_calibration, "chessboard in 18 poses"),
+        Scenario(
+            "calibration-3plane", ThreePlaneCalibrationConfig, plan_calibration, "3-plane chart"
+        ),
     )
 }
 

@@ -1,0 +1,125 @@
+"""Calibration on rendered charts with known truth (issue #3 part 2), against OpenCV.
+
+For each seed, the ``calibration`` scenario of ``folded-x3`` (every effect on) is rendered,
+corners are detected in the PNGs (OpenCV order + saddle refinement), and:
+
+- the stereo calibration (``radial-odd``, the true 4 radial terms) is compared with the
+  ground truth through its own covariance: fraction of parameters within 3σ, RMS and max |z|,
+  the mean squared Mahalanobis distance per parameter (1 for an exact covariance);
+- the even-only ``opencv5`` model is solved on the same corners: RMS per point of both, with
+  outlier rejection (the default) and without it;
+- the single-shot three-plane chart is solved the same way (its z-scores and RMS);
+- speed: our mono solve of the wide camera (``opencv5``) against ``cv2.calibrateCamera`` on
+  the same corners (same model, no rejection), one core, seconds and ratio, with both RMS.
+
+Usage: ``.venv/bin/python benchmarks/bench_calibrate_sim.py [--seeds 20] [--jobs 2] [--json]``
+(20 seeds: ~10 min on 2 cores; ``--seeds 2`` for a look).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"  # one core per worker: set before numpy is imported
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
+from test_calib_sim_support import evaluate_views, render_set, z_summary  # noqa: E402
+
+from phonestereo.calibration.solve import CalibrationOptions, calibrate_camera  # noqa: E402
+from phonestereo.sim.calib_scenario import CalibrationConfig  # noqa: E402
+
+
+def _opencv_vs_ours(views: list) -> dict[str, float]:
+    wide = [v for v in views if v is not None]
+    size = (2000, 1500)
+    objs = [v.object_points.astype(np.float32) for v in wide]
+    imgs = [v.image_points.astype(np.float32) for v in wide]
+    t0 = time.perf_counter()
+    rms_cv, *_ = cv2.calibrateCamera(objs, imgs, size, None, None)
+    t_cv = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ours = calibrate_camera(wide, size, CalibrationOptions("opencv5", reject_outliers=False))
+    t_ours = time.perf_counter() - t0
+    return {
+        "opencv_seconds": t_cv,
+        "ours_seconds": t_ours,
+        "opencv_rms_px_per_point": float(rms_cv),
+        "ours_rms_px_per_point": ours.rms_px_per_point,
+    }
+
+
+def one_seed(seed: int) -> dict:
+    cv2.setNumThreads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        views = render_set(Path(tmp), seed, CalibrationConfig())
+        render_s = time.perf_counter() - t0
+        three_cfg = CalibrationConfig(chart="three-plane")
+        three_views = render_set(Path(tmp) / "three", seed, three_cfg)
+    boards = evaluate_views(views, seed, CalibrationConfig())
+    boards["render_and_detect_seconds"] = render_s
+    boards["speed"] = _opencv_vs_ours(views.wide)
+    three = evaluate_views(three_views, seed, three_cfg)
+    return {"boards": boards, "three_plane": three}
+
+
+def _median(runs: list[dict], key: str, index: int | None = None) -> float:
+    vals = [r[key] if index is None else r[key][index] for r in runs]
+    return float(np.median(vals))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        results = list(pool.map(one_seed, range(args.seeds)))
+    boards = [r["boards"] for r in results]
+    three = [r["three_plane"] for r in results]
+    out: dict[str, float] = {"seeds": args.seeds}
+    out |= {f"boards_{k}": v for k, v in z_summary(boards).items()}
+    out |= {f"three_plane_{k}": v for k, v in z_summary(three).items()}
+    for name, runs in (("boards", boards), ("three_plane", three)):
+        out[f"{name}_odd_rms_px_per_point_median"] = _median(runs, "rms_px_per_point")
+        out[f"{name}_odd_rms_px_per_coordinate_median"] = _median(runs, "rms_px_per_coordinate")
+        out[f"{name}_odd_outliers_median"] = _median(runs, "outliers")
+        out[f"{name}_points_median"] = _median(runs, "points")
+        out[f"{name}_odd_solve_seconds_median"] = _median(runs, "seconds")
+        for mode in ("reject", "all"):
+            ratios = [r[f"even_{mode}"][0] / r[f"odd_{mode}"][0] for r in runs]
+            wide = [r[f"even_{mode}"][1] / r[f"odd_{mode}"][1] for r in runs]
+            out[f"{name}_even_rms_px_per_point_median_{mode}"] = _median(runs, f"even_{mode}", 0)
+            out[f"{name}_even_over_odd_rms_min_{mode}"] = float(min(ratios))
+            out[f"{name}_even_over_odd_rms_wide_min_{mode}"] = float(min(wide))
+    speed = [b["speed"] for b in boards]
+    for k in speed[0]:
+        out[f"mono_wide_{k}_median"] = float(np.median([s[k] for s in speed]))
+    out["mono_wide_time_ratio_ours_vs_opencv"] = (
+        out["mono_wide_ours_seconds_median"] / out["mono_wide_opencv_seconds_median"]
+    )
+    out["render_and_detect_seconds_median"] = _median(boards, "render_and_detect_seconds")
+    out["wall_seconds"] = time.perf_counter() - t0
+    if args.json:
+        print(json.dumps(out))
+    else:
+        for k, v in out.items():
+            print(f"{k:58s} {v:.4f}")
+
+
+if __name__ == "__main__":
+    main()

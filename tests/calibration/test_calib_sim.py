@@ -1,0 +1,173 @@
+"""Calibration on rendered charts with known truth (issue #3 part 2, thesis §1.3.2).
+
+The ``calibration`` scenario of ``folded-x3`` with every effect on (sensor noise, defocus,
+heated, odd-order true lenses) is rendered, corners are detected in the PNGs (OpenCV order +
+saddle refinement, never the truth), and the stereo calibration is compared with the ground
+truth through its own covariance: z = (estimate − truth) / σ for every parameter (both
+cameras' intrinsics and lenses, T_tele_wide, every board pose).
+
+The criterion of the 20-seed test (stated here because "every parameter within 3σ" cannot
+hold literally: with 134 parameters per seed a Gaussian puts 0.27 % of them beyond 3σ):
+
+- the covariance as a whole: the mean over seeds of the squared Mahalanobis distance per
+  parameter, (x − x_true)ᵀ C⁻¹ (x − x_true) / P, is in [0.85, 1.2] (1 ± 0.027 for an exact
+  covariance);
+- per parameter: ≥ 98 % of all z within ±3 (also over the 26 camera + rig parameters alone)
+  and RMS z ≤ 1.3 — looser than an exact covariance gives (99.7 %, 1.0) because z of one
+  seed are strongly correlated (its 18 board poses share a few modes), so they come in lumps.
+
+Measured (see the report): the covariance is a few % optimistic, concentrated in the weak
+modes (focal length vs board distance, tele radial terms): rendered corners carry a
+deterministic error (quantisation, aliasing; ≈ 0.005 px RMS, 16 % of the error variance)
+that the iid-noise covariance cannot know about.
+"""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_calib_sim_support import evaluate_seed, render_set, true_parameters, z_scores, z_summary
+
+from phonestereo.calibration.solve import CalibrationOptions, calibrate_stereo
+from phonestereo.charts.three_plane import ThreePlaneChart
+from phonestereo.errors import InputError
+from phonestereo.sim.calib_scenario import CalibrationConfig
+from phonestereo.sim.ground_truth import ground_truth_json
+from phonestereo.sim.module import load_module
+from phonestereo.sim.scenarios import plan_scenario
+
+SPEC = load_module("folded-x3")
+#: Fast variant: the 9 sensor positions once, 3 tele poses.
+FAST = CalibrationConfig(wide_poses=9, tele_poses=3)
+
+
+def _visible(kp, role: str) -> np.ndarray:
+    return np.isfinite(kp.wide_px if role == "wide" else kp.tele_px).all(axis=1)
+
+
+# --- the chart and the plan (no rendering) -----------------------------------------------------
+
+
+def test_three_plane_chart_is_three_distinct_planes() -> None:
+    chart = ThreePlaneChart()
+    ids, pts = chart.corner_ids(), chart.object_points()
+    assert len(np.unique(ids)) == len(ids) == 108
+    normals = []
+    for plane in chart.planes:
+        p = plane.corners_chart()
+        centred = p - p.mean(axis=0)
+        _, sv, vt = np.linalg.svd(centred)
+        assert sv[2] < 1e-12  # each board is flat
+        normals.append(vt[2] * np.sign(vt[2, 2]))
+    for a in range(3):
+        for b in range(a + 1, 3):  # pairwise ≥ 35° apart: a well-conditioned 3-D target
+            assert np.degrees(np.arccos(normals[a] @ normals[b])) > 35
+    assert np.allclose(chart.object_points_for(ids[::-1]), pts[::-1])
+    with pytest.raises(InputError, match="not corners"):
+        chart.object_points_for([5000])
+    with pytest.raises(InputError, match="wall_deg"):
+        ThreePlaneChart(wall_deg=85)
+
+
+def test_calibration_plan_has_one_true_state_and_whole_boards() -> None:
+    plan = plan_scenario("calibration", SPEC, 3)
+    truths = [pc.truth for pc in plan.captures]
+    assert len(truths) == 18 and all(t.kind == "calibration" for t in truths)
+    for role in ("wide", "tele"):
+        cams = [getattr(t, role).true_camera() for t in truths]
+        # Focus locked, tripod, heated: the true camera is the same in every capture (heating
+        # drift over the 34 s of captures at t ≥ 600 s: < 1e-3 px).
+        assert max(abs(c.cx - cams[0].cx) + abs(c.cy - cams[0].cy) for c in cams) < 1e-3
+        assert max(abs(c.fx - cams[0].fx) for c in cams) < 1e-9
+    assert len({json.dumps(t.T_tele_wide) for t in truths}) == 1
+    for t in truths:
+        kp = t.objects[0].keypoints["corners"].arrays()
+        assert _visible(kp, "wide").all()  # every board whole in the wide
+        if t.id.startswith("T"):
+            assert _visible(kp, "tele").all()  # tele poses: whole in the tele too
+    again = plan_scenario("calibration", SPEC, 3).ground_truth()
+    assert ground_truth_json(again) == ground_truth_json(plan.ground_truth())
+
+
+def test_three_plane_plan_is_one_capture_seen_whole_by_both() -> None:
+    plan = plan_scenario("calibration-3plane", SPEC, 0)
+    same = plan_scenario("calibration", SPEC, 0, config=CalibrationConfig(chart="three-plane"))
+    assert ground_truth_json(plan.ground_truth()) == ground_truth_json(same.ground_truth())
+    (pc,) = plan.captures
+    assert [o.name for o in pc.truth.objects] == ["left", "right", "floor"]
+    for o in pc.truth.objects:
+        kp = o.keypoints["corners"].arrays()
+        assert _visible(kp, "wide").all() and _visible(kp, "tele").all()
+
+
+def test_bad_calibration_configs() -> None:
+    with pytest.raises(InputError, match="cols \\+ rows odd"):
+        CalibrationConfig(pattern=(8, 6))
+    with pytest.raises(InputError, match="chart must be"):
+        CalibrationConfig(chart="sphere")  # type: ignore[arg-type]
+    with pytest.raises(InputError, match="does not fit the tele"):
+        plan_scenario("calibration", SPEC, 0, config=CalibrationConfig(tele_distance_m=0.2))
+
+
+# --- rendered: accuracy against truth ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_boards_recover_truth_within_covariance(seed: int) -> None:
+    run = evaluate_seed(seed, FAST)
+    assert run["views"][0] == 12 and run["views"][1] >= 3  # every planned board found
+    s = z_summary([run])
+    print(json.dumps({k: v for k, v in run.items() if k not in ("z", "names")}), s)
+    # Rendered corners: ~0.012 px noise + ~0.005 px deterministic error per point.
+    assert run["rms_px_per_point"] < 0.02
+    # One seed, ~100 correlated z: the 20-seed criterion (slow test) is the real one; here
+    # a guard that catches a wrong truth or a broken covariance (those give |z| ≫ 5).
+    assert s["within_3sigma_all"] >= 0.97 and s["max_abs_z_all"] < 5.0
+    # Odd-order true lens: the odd model fits ≥ 2× better than OpenCV's even one on the same
+    # corners (no rejection: the even model's rejection drops exactly its misfit corners).
+    assert run["even_all"][0] >= 2.0 * run["odd_all"][0]
+    # With rejection on both, the wide camera (strong odd terms) still ≥ 2×.
+    assert run["even_reject"][1] >= 2.0 * run["odd_reject"][1]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_three_plane_single_shot_recovers_truth(seed: int, tmp_path: Path) -> None:
+    views = render_set(tmp_path, seed, CalibrationConfig(chart="three-plane"))
+    assert views.wide[0].n_points == views.tele[0].n_points == 108  # all three boards
+    res = calibrate_stereo(
+        views.wide, views.tele, views.sizes, CalibrationOptions("radial-odd", n_radial=4)
+    )
+    z = z_scores(res, true_parameters(res, views, None))
+    assert res.rms_px_per_point < 0.02
+    assert np.max(np.abs(z)) < 4.0, dict(zip(res.parameter_names, np.round(z, 2), strict=True))
+    # One shot of a chart covering the image centre: the tele is calibrated to < 1 px of
+    # principal point, the wide's distortion only where the chart was (large σ, stated).
+    sd = res.std
+    assert sd["tele.cx"] < 2.0 and sd["wide.fx"] < 2.0
+
+
+@pytest.mark.slow
+def test_twenty_seeds_every_parameter_within_its_covariance() -> None:
+    with ProcessPoolExecutor() as pool:
+        runs = list(pool.map(evaluate_seed, range(20), [CalibrationConfig()] * 20))
+    s = z_summary(runs)
+    ratio_all = [r["even_all"][0] / r["odd_all"][0] for r in runs]
+    ratio_wide = [r["even_reject"][1] / r["odd_reject"][1] for r in runs]
+    print(json.dumps(s), "ratios", np.round(ratio_all, 2), np.round(ratio_wide, 2))
+    # Every board found where it was planned whole (a centred wide pose may fit the tele too).
+    assert all(r["views"][0] == 18 and r["views"][1] >= 6 for r in runs)
+    # The covariance as a whole: mean d²/P = 1 ± 0.027 for an exact one (20 × χ²₁₃₄); the
+    # band allows a σ off by 10 %.
+    assert 0.85 <= s["mean_mahalanobis2_per_parameter"] <= 1.2
+    # Per parameter (the issue's wording): ≥ 98 % within 3σ and RMS z ≤ 1.3. An exact
+    # covariance gives 99.7 % and 1.0, but the 18 board poses of a seed share a few modes
+    # (scale/distance, the principal point), so one mode at 3σ puts ~20 z beyond 3: the
+    # per-parameter figures are lumpy; the deterministic corner error of the renders
+    # (≈ 0.005 px) makes the covariance a few % optimistic in exactly those weak modes.
+    assert s["within_3sigma_all"] >= 0.98 and s["within_3sigma_rig"] >= 0.98
+    assert 0.8 <= s["rms_z_all"] <= 1.3 and 0.8 <= s["rms_z_rig"] <= 1.3
+    assert min(ratio_all) >= 2.0 and min(ratio_wide) >= 2.0
