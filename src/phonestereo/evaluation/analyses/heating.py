@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +31,13 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.features.verification import detect_verification_chart
+from phonestereo.evaluation.chart_ruler import (
+    CaptureMeasurement,
+    corner_keys,
+    measure_capture,
+    per_corner,
+    shared_keys,
+)
 from phonestereo.fixes.heating import (
     MIN_SAMPLES,
     DriftFit,
@@ -41,7 +46,7 @@ from phonestereo.fixes.heating import (
     drift_rate,
     fit_drift_curve,
 )
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -51,61 +56,17 @@ RATE_WINDOW = 3  # captures (this one and the ones before) in a measured drift r
 Progress = Callable[[int, int, str], None]
 
 
-@dataclass(frozen=True)
-class CaptureMeasurement:
-    """Matched chart corners of one capture, rectified: ids (N, 2), d and e (N,) in pixels."""
-
-    id: str
-    time_s: float
-    temperature_c: float | None
-    found: bool
-    reason: str
-    ids: np.ndarray
-    d_px: F64
-    e_px: F64
-
-
-def _keys(ids: np.ndarray) -> np.ndarray:
-    return np.asarray(ids[:, 0] * 100_000 + ids[:, 1], dtype=np.int64)
-
-
-def measure_capture(cs: CaptureSet, entry: CaptureEntry, rect: Rectification) -> CaptureMeasurement:
-    """Detect the chart in both images, match corners by id, rectify: per-corner d and e (px)."""
-    dets = [detect_verification_chart(read_gray(p)) for p in cs.image_paths(entry.id)]
-    dw, dt = dets
-    common, iw, it = np.intersect1d(_keys(dw.ids), _keys(dt.ids), return_indices=True)
-    bad = [f"{r}: {x.reason}" for r, x in zip(("wide", "tele"), dets, strict=True) if not x.found]
-    if not bad and len(common) < MIN_SAMPLES:
-        bad = [f"only {len(common)} corners seen in both images"]
-    if bad:
-        z, empty = np.zeros(0), np.zeros((0, 2), np.int64)
-        return CaptureMeasurement(
-            entry.id, entry.time_s, entry.temperature_c, False, bad[0], empty, z, z
-        )
-    d, e = rect.disparity(dw.points[iw], dt.points[it])
-    return CaptureMeasurement(
-        entry.id, entry.time_s, entry.temperature_c, True, "", dw.ids[iw], d, e
-    )
-
-
 def _series(ms: list[CaptureMeasurement]) -> tuple[np.ndarray, F64, F64, np.ndarray]:
     """Per capture mean d, e over the corners found in every capture; (keys, d, e, D (M, K))."""
-    good = [m for m in ms if m.found]
-    shared = _keys(good[0].ids)
-    for m in good[1:]:
-        shared = np.intersect1d(shared, _keys(m.ids))
+    shared = shared_keys(ms)
     use_shared = len(shared) >= MIN_COMMON
     d_mean, e_mean = np.full(len(ms), np.nan), np.full(len(ms), np.nan)
-    per_corner = np.full((len(ms), len(shared)), np.nan)
     for i, m in enumerate(ms):
         if not m.found:
             continue
-        k = _keys(m.ids)
-        sel = np.isin(k, shared) if use_shared else np.ones(len(k), bool)
+        sel = np.isin(corner_keys(m.ids), shared) if use_shared else np.ones(len(m.ids), bool)
         d_mean[i], e_mean[i] = float(np.mean(m.d_px[sel])), float(np.mean(m.e_px[sel]))
-        where = {int(key): j for j, key in enumerate(k)}
-        per_corner[i] = m.d_px[[where[int(key)] for key in shared]]
-    return shared, d_mean, e_mean, per_corner
+    return shared, d_mean, e_mean, per_corner(ms, shared)
 
 
 def _truth(
@@ -122,7 +83,7 @@ def _truth(
     d_true = []
     for m in ms:
         kp = gt.capture(m.id).objects[0].keypoints["corners"].arrays()
-        sel = np.isin(_keys(kp.ids), shared)
+        sel = np.isin(corner_keys(kp.ids), shared)
         d, _ = rect.disparity(kp.wide_px[sel], kp.tele_px[sel])
         d_true.append(float(np.nanmean(d)) if np.any(np.isfinite(d)) else float("nan"))
     return {"tau_s": tau, "d_mean_px": d_true}
@@ -189,7 +150,7 @@ def analyze_heating(
     rect = Rectification.from_rig(load_calibration(cs.calibration_path()).rig, "canonical")
     ms = []
     for i, c in enumerate(caps):
-        ms.append(measure_capture(cs, c, rect))
+        ms.append(measure_capture(cs, c, rect, min_corners=MIN_SAMPLES))
         if progress is not None:
             progress(i + 1, len(caps), c.id)
     found = [m for m in ms if m.found]
