@@ -1,0 +1,399 @@
+"""Focus fixes (thesis §3.5): per-attempt scale and offset, stack normalisation, W-T scale.
+
+Focus breathing changes each camera's focal length (a scale of the image about its principal
+point) and a refocus never lands on the same lens position twice (§3.5.3), so every attempt
+of a refocus stack has its own scale. Three small corrections, used by the focus-calibration
+flow (Fig. 4-1) and the learning and application phases (Fig. 4-2 to 4-4):
+
+* :func:`fit_scale_offset` — the scale s and offset o with ``q_to ≈ s·(q_from − c) + c + o``
+  (same camera, one attempt against another, §3.5.3 "same-camera scale/offset");
+* :func:`normalise_to_median` — per attempt, the correction into the stack's median geometry
+  (§3.5.3 option 2.b.1);
+* :func:`fit_wt_scale` — the wide↔tele (W-T) scale: the tele scale s about its principal point
+  and the offset along the non-disparity axis that minimise the spread of the non-disparity
+  error e over the matched points (§3.5.1, §3.5.2), globally or per disparity cluster.
+
+All fits are linear least squares made robust by SciPy's ``least_squares`` (soft-L1 loss);
+σ of each parameter comes from the Jacobian and the residual scale.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from phonestereo.errors import InputError, ShapeError
+from phonestereo.geometry._checks import Array, as_points
+
+#: Fewest point pairs for a scale + offset fit (3 unknowns, some redundancy).
+MIN_POINTS = 6
+
+
+def _pair(q_a: Any, q_b: Any, names: tuple[str, str]) -> tuple[Array, Array]:
+    a = as_points(q_a, 2, names[0]).reshape(-1, 2)
+    b = as_points(q_b, 2, names[1]).reshape(-1, 2)
+    if a.shape != b.shape:
+        raise ShapeError(
+            f"{names[0]} and {names[1]} must pair up row by row, got {a.shape}, {b.shape}"
+        )
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    return a[ok], b[ok]
+
+
+def _center(center_px: Any) -> Array:
+    c = np.asarray(center_px, dtype=np.float64).reshape(-1)
+    if c.shape != (2,) or not np.isfinite(c).all():
+        raise ShapeError(f"center_px must be a finite (x, y) pixel, got {center_px!r}")
+    return c
+
+
+def _robust_linear(A: Array, b: Array, f_scale: float) -> tuple[Array, Array, float, Array]:
+    """Robust solve of A·p ≈ b: (p, σ_p, rms of inliers, residuals)."""
+    p0, *_ = np.linalg.lstsq(A, b, rcond=None)
+    res = least_squares(
+        lambda p: A @ p - b, p0, jac=lambda p: A, loss="soft_l1", f_scale=f_scale, method="trf"
+    )
+    r = A @ res.x - b
+    inl = np.abs(r) <= 3.0 * max(f_scale, 1.4826 * float(np.median(np.abs(r))))
+    dof = max(int(inl.sum()) - A.shape[1], 1)
+    s2 = float(np.sum(r[inl] ** 2)) / dof
+    try:
+        cov = np.linalg.inv(A[inl].T @ A[inl]) * s2
+        sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        sig = np.full(A.shape[1], np.inf)
+    rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("nan")
+    return np.asarray(res.x), sig, rms, r
+
+
+@dataclass(frozen=True)
+class ScaleOffset:
+    """``q' = s·(q − c) + c + o``: an isotropic scale about ``c`` plus an offset (pixels).
+
+    Attributes
+    ----------
+    scale : float
+        s (1 = no change).
+    offset_px : (2,) float64
+        o, pixels.
+    center_px : (2,) float64
+        c, pixels (the camera's principal point).
+    sigma_scale : float
+        1σ of s (0 for an exact/constructed transform).
+    sigma_offset_px : (2,) float64
+        1σ of o.
+    rms_px : float
+        RMS residual of the fit over its inliers (per coordinate).
+    n : int
+        Point pairs used.
+    ok : bool
+        False when the data could not give the fit (``reason``).
+
+    Examples
+    --------
+    >>> t = ScaleOffset(1.001, np.array([0.5, 0.0]), np.array([1000.0, 750.0]))
+    >>> t.apply([[2000.0, 750.0]]).round(3).tolist()
+    [[2001.5, 750.0]]
+    >>> t.inverse().apply(t.apply([[10.0, 20.0]])).round(9).tolist()
+    [[10.0, 20.0]]
+    """
+
+    scale: float
+    offset_px: Array
+    center_px: Array
+    sigma_scale: float = 0.0
+    sigma_offset_px: Array = field(default_factory=lambda: np.zeros(2))
+    rms_px: float = 0.0
+    n: int = 0
+    ok: bool = True
+    reason: str = ""
+
+    @classmethod
+    def identity(cls, center_px: Any) -> ScaleOffset:
+        """s = 1, o = 0 about ``center_px``."""
+        return cls(1.0, np.zeros(2), _center(center_px))
+
+    def apply(self, q: Any) -> Array:
+        """Map pixels (..., 2) → (..., 2)."""
+        p = as_points(q, 2, "q")
+        return np.asarray(self.scale * (p - self.center_px) + self.center_px + self.offset_px)
+
+    def inverse(self) -> ScaleOffset:
+        """The transform that undoes this one (same centre)."""
+        s = self.scale
+        return ScaleOffset(
+            1.0 / s, -np.asarray(self.offset_px) / s, self.center_px,
+            self.sigma_scale / s**2, np.asarray(self.sigma_offset_px) / s, self.rms_px, self.n,
+            self.ok, self.reason,
+        )  # fmt: skip
+
+    def then(self, other: ScaleOffset) -> ScaleOffset:
+        """``other ∘ self`` (apply self, then other); both must share the centre."""
+        if not np.allclose(self.center_px, other.center_px, atol=1e-9):
+            raise InputError("compose scale/offset transforms about the same centre only")
+        s = other.scale * self.scale
+        o = other.scale * np.asarray(self.offset_px) + np.asarray(other.offset_px)
+        return ScaleOffset(s, o, self.center_px, n=min(self.n, other.n))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "scale": float(self.scale), "offset_px": [float(v) for v in self.offset_px],
+            "center_px": [float(v) for v in self.center_px],
+            "sigma_scale": float(self.sigma_scale),
+            "sigma_offset_px": [float(v) for v in self.sigma_offset_px],
+            "rms_px": float(self.rms_px), "n": int(self.n), "ok": self.ok, "reason": self.reason,
+        }  # fmt: skip
+
+
+def fit_scale_offset(
+    q_from: Any, q_to: Any, center_px: Any, *, f_scale_px: float = 0.3
+) -> ScaleOffset:
+    """Scale and offset mapping ``q_from`` onto ``q_to`` about ``center_px`` (thesis §3.5.3).
+
+    Same camera, two focus attempts: ``q_to ≈ s·(q_from − c) + c + o``. A robust linear
+    least-squares fit (soft-L1, ``f_scale_px``); with fewer than :data:`MIN_POINTS` pairs or
+    no spread about ``c`` the result is not ok (with the reason), never an exception.
+
+    Parameters
+    ----------
+    q_from, q_to : array_like, shape (N, 2)
+        Matched pixels of the same scene points in the two attempts.
+    center_px : array_like, shape (2,)
+        The camera's principal point, pixels.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> q = rng.uniform(0, 2000, (200, 2))
+    >>> c = np.array([1000.0, 750.0])
+    >>> fit = fit_scale_offset(q, 1.0008 * (q - c) + c + [0.3, -0.2], c)
+    >>> round(fit.scale, 6), fit.offset_px.round(6).tolist()
+    (1.0008, [0.3, -0.2])
+    """
+    a, b = _pair(q_from, q_to, ("q_from", "q_to"))
+    c = _center(center_px)
+    if len(a) < MIN_POINTS:
+        return ScaleOffset(
+            1.0, np.zeros(2), c, np.inf, np.full(2, np.inf), float("nan"), len(a), False,
+            f"{len(a)} point pairs; a scale/offset fit needs >= {MIN_POINTS}",
+        )  # fmt: skip
+    u = a - c
+    if float(np.sqrt(np.mean(np.sum((u - u.mean(0)) ** 2, axis=1)))) < 1.0:
+        return ScaleOffset(
+            1.0, np.zeros(2), c, np.inf, np.full(2, np.inf), float("nan"), len(a), False,
+            "the points do not spread (< 1 px): no scale can be measured",
+        )  # fmt: skip
+    n = len(a)
+    A = np.zeros((2 * n, 3))
+    A[:n, 0], A[n:, 0] = u[:, 0], u[:, 1]
+    A[:n, 1], A[n:, 2] = 1.0, 1.0
+    rhs = np.concatenate([b[:, 0] - c[0], b[:, 1] - c[1]])
+    p, sig, rms, _ = _robust_linear(A, rhs, f_scale_px)
+    return ScaleOffset(float(p[0]), p[1:3].copy(), c, float(sig[0]), sig[1:3].copy(), rms, n)
+
+
+def normalise_to_median(fits: Sequence[ScaleOffset]) -> list[ScaleOffset]:
+    """Per attempt, the correction into the refocus stack's median geometry (§3.5.3, 2.b.1).
+
+    ``fits[i]`` maps the reference attempt onto attempt i (:func:`fit_scale_offset` of the
+    reference's points to attempt i's). The median attempt has scale median(s_i) and offset
+    median(o_i); the correction of attempt i maps its pixels there:
+    ``q_med = (s_m/s_i)·(q_i − c − o_i) + c + o_m``. Failed fits get an identity (not ok).
+
+    Examples
+    --------
+    >>> c = np.array([0.0, 0.0])
+    >>> fits = [ScaleOffset(s, np.zeros(2), c) for s in (1.0, 1.002, 0.999)]
+    >>> [round(f.scale, 6) for f in normalise_to_median(fits)]
+    [1.0, 0.998004, 1.001001]
+    """
+    if not fits:
+        raise InputError("normalise_to_median needs at least one attempt's fit")
+    good = [f for f in fits if f.ok]
+    if not good:
+        return [ScaleOffset.identity(f.center_px) for f in fits]
+    c = good[0].center_px
+    s_m = float(np.median([f.scale for f in good]))
+    o_m = np.median(np.array([f.offset_px for f in good]), axis=0)
+    out = []
+    for f in fits:
+        if not f.ok:
+            out.append(ScaleOffset(1.0, np.zeros(2), c, ok=False, reason=f.reason))
+            continue
+        k = s_m / f.scale
+        out.append(
+            ScaleOffset(k, o_m - k * np.asarray(f.offset_px), c, f.sigma_scale * k / f.scale,
+                        np.asarray(f.sigma_offset_px), f.rms_px, f.n)
+        )  # fmt: skip
+    return out
+
+
+@dataclass(frozen=True)
+class WTScale:
+    """The W-T scale (thesis §3.5.1): tele scale s about its (rectified) principal point and
+    the offset o along the non-disparity axis that minimise the spread of e.
+
+    After rectification (disparity along x), ``y_w − c_y ≈ s·(y_t − c_y) + o``; the same s
+    applies along x, so the corrected tele point is ``(c_x + s·(x_t − c_x), c_y + s·(y_t −
+    c_y) + o)`` and the corrected disparity ``d' = x_w − c_x − s·(x_t − c_x)``.
+
+    Attributes
+    ----------
+    scale, offset_px : float
+        s and o (pixels, non-disparity axis).
+    center_px : (2,) float64
+        The tele principal point in the rectified frame, pixels.
+    sigma_scale, sigma_offset_px : float
+        1σ of s and o.
+    rms_e_px : float
+        Spread (RMS) of e after the fix, inliers.
+    rms_e_before_px : float
+        Spread (RMS about the mean) of e before.
+    n : int
+        Points used.
+    ok : bool
+    reason : str
+    """
+
+    scale: float
+    offset_px: float
+    center_px: Array
+    sigma_scale: float = 0.0
+    sigma_offset_px: float = 0.0
+    rms_e_px: float = 0.0
+    rms_e_before_px: float = 0.0
+    n: int = 0
+    ok: bool = True
+    reason: str = ""
+
+    def apply_tele(self, q_tele_rect: Any) -> Array:
+        """Corrected rectified tele pixels (..., 2)."""
+        q = as_points(q_tele_rect, 2, "q_tele_rect")
+        out = self.scale * (q - self.center_px) + self.center_px
+        out[..., 1] += self.offset_px
+        return np.asarray(out)
+
+    def disparity(self, q_wide_rect: Any, q_tele_rect: Any) -> tuple[Array, Array]:
+        """Corrected (d, e) of rectified pairs (...,), pixels."""
+        qw = as_points(q_wide_rect, 2, "q_wide_rect")
+        diff = qw - self.apply_tele(q_tele_rect)
+        return np.asarray(diff[..., 0]), np.asarray(diff[..., 1])
+
+    def correct_disparity(self, x_wide_rect: Any, d: Any) -> Array:
+        """Corrected disparity from the wide x and the measured d (``x_t = x_w − d``)."""
+        xw = np.asarray(x_wide_rect, dtype=np.float64)
+        xt = xw - np.asarray(d, dtype=np.float64)
+        return np.asarray(xw - self.center_px[0] - self.scale * (xt - self.center_px[0]))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {
+            "scale": float(self.scale), "offset_px": float(self.offset_px),
+            "center_px": [float(v) for v in self.center_px],
+            "sigma_scale": float(self.sigma_scale), "sigma_offset_px": float(self.sigma_offset_px),
+            "rms_e_px": float(self.rms_e_px), "rms_e_before_px": float(self.rms_e_before_px),
+            "n": int(self.n), "ok": self.ok, "reason": self.reason,
+        }  # fmt: skip
+
+
+def _fit_wt(qw: Array, qt: Array, c: Array, w: Array, f_scale: float, min_spread: float) -> WTScale:
+    n = len(qw)
+    e0 = qw[:, 1] - qt[:, 1]
+    before = float(np.sqrt(np.mean((e0 - e0.mean()) ** 2))) if n else float("nan")
+    if n < MIN_POINTS:
+        return WTScale(1.0, 0.0, c, np.inf, np.inf, float("nan"), before, n, False,
+                       f"{n} matches; the W-T scale needs >= {MIN_POINTS}")  # fmt: skip
+    u = qt[:, 1] - c[1]
+    if float(np.std(u)) < min_spread:
+        return WTScale(1.0, float(np.median(e0)), c, np.inf, np.inf, before, before, n, False,
+                       f"the matches span {np.std(u):.1f} px (std) across the disparity axis; "
+                       f"the W-T scale needs >= {min_spread} px")  # fmt: skip
+    A = np.column_stack([u, np.ones(n)]) * w[:, None]
+    rhs = (qw[:, 1] - c[1]) * w
+    p, sig, _, r = _robust_linear(A, rhs, f_scale)
+    resid = r / np.where(w > 0, w, 1.0)
+    inl = np.abs(resid) <= 3.0 * max(f_scale, 1.4826 * float(np.median(np.abs(resid))))
+    rms = float(np.sqrt(np.mean(resid[inl] ** 2))) if inl.any() else float("nan")
+    return WTScale(float(p[0]), float(p[1]), c, float(sig[0]), float(sig[1]), rms, before, n)
+
+
+def fit_wt_scale(
+    q_wide_rect: Any,
+    q_tele_rect: Any,
+    center_px: Any,
+    *,
+    sigma_px: Any = None,
+    clusters: Any = None,
+    f_scale_px: float = 0.05,
+    min_spread_px: float = 5.0,
+) -> WTScale | dict[Any, WTScale]:
+    """The W-T scale and non-disparity offset minimising the spread of e (thesis §3.5.1–2).
+
+    Parameters
+    ----------
+    q_wide_rect, q_tele_rect : array_like, shape (N, 2)
+        Matched points, rectified (disparity along x).
+    center_px : array_like, shape (2,)
+        The tele principal point in the rectified frame.
+    sigma_px : array_like, shape (N,), optional
+        Per-match 1σ of e (weights 1/σ); default equal weights.
+    clusters : array_like, shape (N,), optional
+        Disparity-cluster label per match: one fit per label (§3.5.2 dual-depth scene), as a
+        dict label → :class:`WTScale`.
+    f_scale_px : float
+        Soft-L1 scale of e residuals (pixels, in weighted units when ``sigma_px`` is given).
+    min_spread_px : float
+        Smallest std of the tele y about the centre for a scale to be measurable.
+
+    Examples
+    --------
+    Tele scaled by 1 − 8·10⁻⁴ (a refocus) about its centre: recovered from e alone.
+
+    >>> rng = np.random.default_rng(2)
+    >>> qw = rng.uniform([300, 300], [700, 700], (300, 2))
+    >>> c = np.array([500.0, 480.0])
+    >>> qt = qw - [12.0, 0.0]
+    >>> qt = (1 - 8e-4) * (qt - c) + c + [0.0, 0.4]
+    >>> fit = fit_wt_scale(qw, qt, c)
+    >>> round(1 / fit.scale, 6), round(fit.offset_px + 0.4 / (1 - 8e-4), 6), fit.ok
+    (0.9992, 0.0, True)
+    """
+    qw, qt = _pair(q_wide_rect, q_tele_rect, ("q_wide_rect", "q_tele_rect"))
+    c = _center(center_px)
+    n_all = as_points(q_wide_rect, 2, "q_wide_rect").reshape(-1, 2).shape[0]
+    keep = np.isfinite(as_points(q_wide_rect, 2, "q").reshape(-1, 2)).all(1) & np.isfinite(
+        as_points(q_tele_rect, 2, "q").reshape(-1, 2)
+    ).all(1)
+    w = np.ones(n_all)
+    if sigma_px is not None:
+        s = np.asarray(sigma_px, dtype=np.float64).reshape(-1)
+        if s.shape != (n_all,):
+            raise ShapeError(f"sigma_px must have one value per match ({n_all}), got {s.shape}")
+        w = 1.0 / np.clip(s, 1e-4, None)
+        w = w / np.median(w[keep]) if keep.any() else w
+    w = w[keep]
+    if clusters is None:
+        return _fit_wt(qw, qt, c, w, f_scale_px, min_spread_px)
+    lab = np.asarray(clusters).reshape(-1)
+    if lab.shape != (n_all,):
+        raise ShapeError(f"clusters must have one label per match ({n_all}), got {lab.shape}")
+    lab = lab[keep]
+    return {
+        k: _fit_wt(qw[lab == k], qt[lab == k], c, w[lab == k], f_scale_px, min_spread_px)
+        for k in np.unique(lab)
+    }
+
+
+__all__ = [
+    "MIN_POINTS",
+    "ScaleOffset",
+    "WTScale",
+    "fit_scale_offset",
+    "fit_wt_scale",
+    "normalise_to_median",
+]
