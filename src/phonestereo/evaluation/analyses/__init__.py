@@ -9,7 +9,7 @@ are imported only when run (Matplotlib is slow to import).
 Examples
 --------
 >>> sorted(ANALYSES)
-['heating']
+['distortion', 'heating', 'translation']
 >>> ANALYSES["heating"].summary
 'warm-up drift of the disparity: fit A, τ, saturation time; warm-up gate (§3.1)'
 """
@@ -85,6 +85,25 @@ ANALYSES: dict[str, AnalysisSpec] = {
         "~10 s for several minutes (>= 4 'verification' captures at distinct time_s), e.g. "
         "`phonestereo simulate heating`",
         "phonestereo.evaluation.analyses.heating:run",
+    ),
+    "distortion": AnalysisSpec(
+        "distortion",
+        "residual distortion through e: e over the image and vs radius, the e-axis fix (offset "
+        "+ radial polynomial), undistort-both, even vs odd lens model (§3.2)",
+        "a flat verification chart filling the tele on a tripod (>= 1 'verification' capture; "
+        "several focus distances show Figs. 3-5/3-6), e.g. `phonestereo simulate refocus`; "
+        "optional 'calibration' captures (9x6 chessboard, 20 mm) add the even-vs-odd lens "
+        "comparison",
+        "phonestereo.evaluation.analyses.distortion:run",
+    ),
+    "translation": AnalysisSpec(
+        "translation",
+        "non-baseline translation: mean e of two charts at two depths, rotation-only vs "
+        "canonical rectification; t_y, t_z measured from e (§3.3)",
+        "two verification charts at two depths on a tripod (>= 1 'verification' capture: a "
+        "10x8-square 18 mm chart near, the standard chart far), e.g. "
+        "`phonestereo simulate dual-depth`",
+        "phonestereo.evaluation.analyses.translation:run",
     ),
 }
 
