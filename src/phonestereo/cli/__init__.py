@@ -16,6 +16,7 @@ from phonestereo.cli import io_commands as _io  # noqa: F401
 from phonestereo.cli import learn as _learn  # noqa: F401
 from phonestereo.cli import match as _match  # noqa: F401
 from phonestereo.cli import rectify as _rectify  # noqa: F401
+from phonestereo.cli import scaleout as _scaleout  # noqa: F401
 from phonestereo.cli import simulate as _simulate  # noqa: F401
 from phonestereo.cli import store as _store  # noqa: F401
 from phonestereo.cli.app import app
