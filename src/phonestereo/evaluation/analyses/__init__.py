@@ -9,7 +9,7 @@ are imported only when run (Matplotlib is slow to import).
 Examples
 --------
 >>> sorted(ANALYSES)
-['distortion', 'heating', 'translation']
+['distortion', 'heating', 'repeatability', 'translation', 'wt-scale']
 >>> ANALYSES["heating"].summary
 'warm-up drift of the disparity: fit A, τ, saturation time; warm-up gate (§3.1)'
 """
@@ -104,6 +104,22 @@ ANALYSES: dict[str, AnalysisSpec] = {
         "10x8-square 18 mm chart near, the standard chart far), e.g. "
         "`phonestereo simulate dual-depth`",
         "phonestereo.evaluation.analyses.translation:run",
+    ),
+    "wt-scale": AnalysisSpec(
+        "wt-scale",
+        "W-T scale per refocus attempt, global and per depth; disparity range before/after; "
+        "Table 2 (§3.5.2)",
+        "a refocus stack: >= 2 'verification' captures of one or two static charts on a tripod "
+        "sharing a focus_group, e.g. `phonestereo simulate refocus` or `dual-depth`",
+        "phonestereo.evaluation.analyses.wt_scale:run",
+    ),
+    "repeatability": AnalysisSpec(
+        "repeatability",
+        "same-camera refocus repeatability: per-corner range, median normalisation, averaging "
+        "(Table 3, §3.5.3)",
+        "a refocus stack: >= 2 'verification' captures of one static chart on a tripod sharing "
+        "a focus_group, e.g. `phonestereo simulate refocus`",
+        "phonestereo.evaluation.analyses.repeatability:run",
     ),
 }
 

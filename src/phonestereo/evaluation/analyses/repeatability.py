@@ -1,0 +1,321 @@
+"""Same-camera focus repeatability analysis (thesis §3.5.3, Figures 3-20 / 3-21, Table 3).
+
+A refocus stack (tripod, one static verification chart, N manual refocus attempts at the same
+focus setting) is measured with the chart ruler over the corners seen in every attempt. Even
+on a tripod each attempt has its own scale per camera, so every corner's disparity ranges over
+the stack (Figure 3-20). Two fixes are measured:
+
+* normalisation to the stack's median (§3.5.3 option 2.b.1): per camera, the scale and offset
+  of every attempt against the first (:func:`~phonestereo.fixes.focus.fit_scale_offset`), the
+  median of those as the stack's geometry, and each attempt's pixels mapped there
+  (:func:`~phonestereo.fixes.focus.normalise_to_median`) before rectification;
+* averaging the disparity of n attempts chosen at random (option 2, Figure 3-21, Table 3):
+  the per-corner range of the n-averages over random trials and their relative error against
+  the all-attempt mean (δZ/Z = δd/d).
+
+Focus fails (sharpness far below the stack's median) are left out. With ``ground_truth.json``
+the fitted per-attempt scales are compared with the true focal-length ratios. Outputs:
+``repeatability.json``, ``repeatability_corner_range.png``, ``repeatability_averaging.png``,
+``repeatability_scales.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from phonestereo.errors import InputError
+from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.chart_ruler import corner_keys, measure_capture, shared_keys
+from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
+from phonestereo.fixes.refocus import averaging_trials, detect_focus_failures, sharpness
+from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.rectification import Rectification
+
+F64 = np.ndarray
+AVERAGE_N = (1, 3, 5)  # attempts averaged (Table 3 rows)
+Progress = Callable[[int, int, str], None]
+
+
+# --- shared with the wt-scale analysis ------------------------------------------------------
+def stack_entries(cs: CaptureSet, analysis: str, what: str) -> list[CaptureEntry]:
+    """The largest refocus stack of verification captures (>= 2 attempts), ordered by attempt."""
+    groups: dict[str, list[CaptureEntry]] = {}
+    for c in cs.captures():
+        if c.kind == "verification" and c.focus_group is not None:
+            groups.setdefault(c.focus_group, []).append(c)
+    best = max(groups.values(), key=len, default=[])
+    if len(best) < 2:
+        raise InputError(
+            f"the {analysis} analysis needs a refocus stack: >= 2 'verification' captures of "
+            f"{what} on a tripod sharing a focus_group (one per focus_attempt), e.g. "
+            f"`phonestereo simulate refocus`; {cs.root} has none with >= 2 attempts"
+        )
+    return sorted(best, key=lambda c: (c.focus_attempt or 0, c.time_s))
+
+
+def focus_check(cs: CaptureSet, caps: list[CaptureEntry]) -> list[dict[str, Any]]:
+    """Focus-fail verdicts of a stack (§3.5.1): sharpness of the wide ROI and the tele image
+    against the stack's median; per capture ``focus_wide``, ``focus_tele``, ``focus_fail``."""
+    sharp = []
+    for entry in caps:
+        w, t = (read_gray(p) for p in cs.image_paths(entry.id))
+        sharp.append((sharpness(w, entry.roi), sharpness(t)))
+    vw, vt = (detect_focus_failures([s[j] for s in sharp]) for j in (0, 1))
+    return [
+        {"focus_wide": a.to_dict(), "focus_tele": b.to_dict(), "focus_fail": a.failed or b.failed}
+        for a, b in zip(vw, vt, strict=True)
+    ]
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Render a Matplotlib figure (Agg) to ``path`` (PNG, 110 dpi)."""
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def map_panel(fig: Figure, ax: Any, xy: F64, v: F64, title: str, label: str, **kw: Any) -> None:
+    """Scatter of per-corner values at their (rectified wide) pixels, with a colour bar."""
+    sc = ax.scatter(xy[:, 0], xy[:, 1], c=v, s=10, cmap=kw.pop("cmap", "viridis"), **kw)
+    fig.colorbar(sc, ax=ax, label=label)
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("rectified x [px]")
+    ax.set_ylabel("rectified y [px]")
+    ax.invert_yaxis()
+    ax.set_aspect("equal")
+
+
+def json_clean(v: Any) -> Any:
+    """JSON-safe copy: private ``_`` keys dropped, NaN/inf → None, NumPy → Python."""
+    if isinstance(v, dict):
+        return {k: json_clean(x) for k, x in v.items() if not str(k).startswith("_")}
+    if isinstance(v, list | tuple):
+        return [json_clean(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return json_clean(v.tolist())
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v
+
+
+def _stats(D: F64) -> dict[str, float]:
+    pc = np.ptp(D, axis=0)
+    return {"corner_range_median_px": float(np.nanmedian(pc)),
+            "corner_range_max_px": float(np.nanmax(pc)),
+            "chart_range_px": float(np.nanmax(D) - np.nanmin(D))}  # fmt: skip
+
+
+def _truth_scales(root: Path, ids: list[str]) -> Any:
+    """True focal-length ratio of each attempt to the first, per camera (sim), or None."""
+    from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, load_ground_truth
+
+    if not (root / GROUND_TRUTH_NAME).is_file():
+        return None
+    gt = load_ground_truth(root / GROUND_TRUTH_NAME)
+    caps = [gt.capture(i) for i in ids]
+    return {
+        role: [getattr(c, role).true_camera().fx / getattr(caps[0], role).true_camera().fx
+               for c in caps]
+        for role in ("wide", "tele")
+    }  # fmt: skip
+
+
+def analyze_repeatability(
+    capture_set: str | Path | CaptureSet,
+    *,
+    trials: int = 200,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Measure the refocus repeatability of a stack; the JSON-ready table (module docstring).
+
+    Parameters
+    ----------
+    capture_set : path or CaptureSet
+    trials : int
+        Random draws of n attempts per Table 3 row.
+    seed : int
+        Seed of those draws.
+
+    Raises
+    ------
+    InputError
+        An invalid set, or one without a refocus stack of verification captures.
+    """
+    t0 = time.perf_counter()
+    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    caps = stack_entries(cs, "repeatability", "one static verification chart")
+    rig = load_calibration(cs.calibration_path()).rig
+    rect = Rectification.from_rig(rig, "canonical")
+    ms = []
+    for i, entry in enumerate(caps):
+        ms.append(measure_capture(cs, entry, rect))
+        if progress is not None:
+            progress(i + 1, len(caps), entry.id)
+    focus = focus_check(cs, caps)
+    rows = [
+        {
+            "id": m.id,
+            "attempt": e.focus_attempt,
+            "found": m.found,
+            "reason": m.reason,
+            "n_corners": len(m.ids),
+            **f,
+        }
+        for m, e, f in zip(ms, caps, focus, strict=True)
+    ]
+    used = [m for m, r in zip(ms, rows, strict=True) if m.found and not r["focus_fail"]]
+    base = {
+        "analysis": "repeatability",
+        "capture_set": str(cs.root),
+        "focus_group": caps[0].focus_group,
+        "captures_total": len(ms),
+        "captures_used": len(used),
+        "f_px": rect.f_px,
+        "baseline_m": rect.baseline_m,
+    }
+    keys = shared_keys(used)
+    if len(used) < 2 or len(keys) < 6:
+        why = "; ".join(f"{r['id']}: {r['reason'] or 'focus fail'}" for r in rows
+                        if not r["found"] or r["focus_fail"])  # fmt: skip
+        reason = f"{len(used)} usable attempts, {len(keys)} corners in all: {why}"[:600]
+        return {**base, "ok": False, "reason": reason, "captures": rows}
+    sel = [np.intersect1d(corner_keys(m.ids), keys, return_indices=True)[1] for m in used]
+    Qw = np.stack([m.q_wide[i] for m, i in zip(used, sel, strict=True)])  # (M, K, 2) raw px
+    Qt = np.stack([m.q_tele[i] for m, i in zip(used, sel, strict=True)])
+    D0 = np.stack([m.d_px[i] for m, i in zip(used, sel, strict=True)])  # (M, K)
+    c_w, c_t = rig.wide.K[:2, 2], rig.tele.K[:2, 2]
+    fits = {"wide": [fit_scale_offset(Qw[0], q, c_w) for q in Qw],
+            "tele": [fit_scale_offset(Qt[0], q, c_t) for q in Qt]}  # fmt: skip
+    corr = {role: normalise_to_median(f) for role, f in fits.items()}
+    Qw_n = np.stack([t.apply(q) for t, q in zip(corr["wide"], Qw, strict=True)])
+    Qt_n = np.stack([t.apply(q) for t, q in zip(corr["tele"], Qt, strict=True)])
+    D1 = rect.disparity(Qw_n, Qt_n)[0]
+    before, after = _stats(D0), _stats(D1)
+    mean_all = np.nanmean(D0, axis=0)
+    table3, avg = [], {}
+    for n in (k for k in AVERAGE_N if k <= len(used)):
+        A = averaging_trials(D0, n, trials, seed)  # (trials, K)
+        rel = 100 * np.abs(A / mean_all - 1)
+        pc = np.ptp(A, axis=0)
+        table3.append({"n": n, "corner_range_median_px": float(np.nanmedian(pc)),
+                       "corner_range_max_px": float(np.nanmax(pc)),
+                       "relative_error_median_pct": float(np.nanmedian(rel)),
+                       "relative_error_p90_pct": float(np.nanpercentile(rel, 90)),
+                       "relative_error_max_pct": float(np.nanmax(rel))})  # fmt: skip
+        avg[n] = pc
+    out: dict[str, Any] = {
+        **base, "ok": True, "reason": "", "corners_in_every_attempt": len(keys),
+        "mean_d_px": float(np.nanmean(D0)),
+        "depth_m": rect.f_px * rect.baseline_m / float(np.nanmean(D0)),
+        "before": before, "after_normalisation": after,
+        "normalisation_shrink": before["corner_range_median_px"]
+        / max(after["corner_range_median_px"], 1e-9),
+        "fits": {role: [f.to_dict() for f in fs] for role, fs in fits.items()},
+        "corrections": {role: [f.to_dict() for f in fs] for role, fs in corr.items()},
+        "table3": table3, "trials": trials, "captures": rows,
+    }  # fmt: skip
+    truth = _truth_scales(cs.root, [m.id for m in used])
+    if truth is not None:
+        err = {r: float(np.max(np.abs(np.array([f.scale for f in fits[r]]) - np.array(truth[r]))))
+               for r in ("wide", "tele")}  # fmt: skip
+        out["truth"] = {"scale_ratio": truth, "scale_error_max": err}
+    out["_xy"] = np.nanmean(rect.points_wide(Qw), axis=0)
+    out["_before"], out["_after"], out["_avg"] = D0, D1, avg
+    out["seconds"] = round(time.perf_counter() - t0, 2)
+    return out
+
+
+def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
+    """The three PNG figures of a repeatability table (see module docstring)."""
+    xy, M, files = tb["_xy"], tb["captures_used"], []
+    fig = Figure(figsize=(12, 5), constrained_layout=True)
+    axes = fig.subplots(1, 2)
+    top = float(np.nanmax(np.ptp(tb["_before"], axis=0)))
+    for ax, key, name in zip(axes, ("_before", "_after"), ("raw", "normalised to the median"),
+                             strict=True):  # fmt: skip
+        pc = np.ptp(tb[key], axis=0)
+        map_panel(
+            fig,
+            ax,
+            xy,
+            pc,
+            f"{name}: per-corner range median {np.median(pc):.3f}, max {np.max(pc):.3f} px",
+            f"d range over {M} attempts [px]",
+            vmin=0,
+            vmax=top,
+        )
+    fig.suptitle("Disparity range of each corner over the refocus stack (thesis Fig. 3-20)")
+    files.append(save_figure(fig, out_dir / "repeatability_corner_range.png"))
+    rows = tb["table3"]
+    fig = Figure(figsize=(5 * len(rows), 4.8), constrained_layout=True)
+    axes = np.atleast_1d(fig.subplots(1, len(rows)))
+    top = max(float(np.nanmax(tb["_avg"][r["n"]])) for r in rows)
+    for ax, r in zip(axes, rows, strict=True):
+        map_panel(fig, ax, xy, tb["_avg"][r["n"]], f"mean of {r['n']} attempt(s): range median "
+                  f"{r['corner_range_median_px']:.3f} px, rel. error median "
+                  f"{r['relative_error_median_pct']:.2f} %",
+                  f"range over {tb['trials']} random draws [px]", vmin=0, vmax=top)  # fmt: skip
+    fig.suptitle("Averaging the disparity over refocus attempts (thesis Fig. 3-21, Table 3)")
+    files.append(save_figure(fig, out_dir / "repeatability_averaging.png"))
+    fig = Figure(figsize=(8, 4.5), constrained_layout=True)
+    ax = fig.subplots()
+    for role, mk in (("wide", "o"), ("tele", "s")):
+        s = [f["scale"] for f in tb["fits"][role]]
+        ax.plot(range(len(s)), s, mk + "-", label=f"{role}: fitted (vs attempt 0)")
+        if "truth" in tb:
+            ax.plot(range(len(s)), tb["truth"]["scale_ratio"][role], "x", ms=9,
+                    label=f"{role}: true focal ratio")  # fmt: skip
+    ax.set_title("Same-camera scale of each refocus attempt against the first")
+    ax.set_xlabel("focus attempt (usable, in order)")
+    ax.set_ylabel("scale s [-]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    files.append(save_figure(fig, out_dir / "repeatability_scales.png"))
+    return files
+
+
+def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
+    if not tb["ok"]:
+        return (f"repeatability: no result: {tb['reason']}",)
+    b, a = tb["before"], tb["after_normalisation"]
+    lines = [
+        f"repeatability: {tb['captures_used']}/{tb['captures_total']} attempts of stack "
+        f"{tb['focus_group']}, {tb['corners_in_every_attempt']} corners in all ({tb['seconds']} s)",
+        f"per-corner d range: median {b['corner_range_median_px']:.3f} → "
+        f"{a['corner_range_median_px']:.3f} px, max {b['corner_range_max_px']:.3f} → "
+        f"{a['corner_range_max_px']:.3f} px after normalisation to the median "
+        f"({tb['normalisation_shrink']:.1f}×)",
+        "Table 3: " + "; ".join(
+            f"mean of {r['n']}: range {r['corner_range_median_px']:.3f} px, error "
+            f"{r['relative_error_median_pct']:.2f} % (p90 {r['relative_error_p90_pct']:.2f} %)"
+            for r in tb["table3"]),
+    ]  # fmt: skip
+    if "truth" in tb:
+        e = tb["truth"]["scale_error_max"]
+        lines.append(f"truth: same-camera scale error ≤ {e['wide']:.1e} (wide), "
+                     f"{e['tele']:.1e} (tele)")  # fmt: skip
+    return tuple(lines)
+
+
+def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
+    """Registry entry: analyse, write ``repeatability.json`` and the figures into ``out_dir``."""
+    tb = analyze_repeatability(capture_set, progress=progress)
+    files = write_figures(tb, out_dir) if tb["ok"] else []
+    clean = json_clean(tb)
+    path = out_dir / "repeatability.json"
+    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
+    files.append(path)
+    return AnalysisOutput(
+        "repeatability", bool(tb["ok"]), tb["reason"], _summary(tb), clean, tuple(files)
+    )
