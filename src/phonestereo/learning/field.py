@@ -62,6 +62,11 @@ class FieldConfig:
         Residual (px) where the loss turns robust; None = 1.5 × the robust residual scatter.
     seed : int
         Seed of the fold assignment.
+    min_degree_gain : int
+        Lowest gain degree the model choice may pick (-1: no gain term allowed; 0: always a
+        constant gain, the physics of a baseline or focal-length error, §3.6 — the learned
+        disparities rarely span enough for cross-validation to prove it, yet it decides the
+        extrapolation beyond them).
     """
 
     max_degree: int = 3
@@ -69,8 +74,11 @@ class FieldConfig:
     loss: str = "soft_l1"
     f_scale_px: float | None = None
     seed: int = 0
+    min_degree_gain: int = -1
 
     def __post_init__(self) -> None:
+        if not -1 <= self.min_degree_gain <= self.max_degree:
+            raise InputError(f"min_degree_gain must be -1..max_degree, got {self.min_degree_gain}")
         if not 0 <= self.max_degree <= 3:
             raise InputError(f"max_degree must be 0..3, got {self.max_degree}")
         if self.folds < 2:
@@ -325,10 +333,11 @@ def fit_field(
     enough = len(obs) >= 2 * cfg.folds
     cv = _cross_validate(frame, q, c, _groups(obs), cfg, f) if enough else []
     if cv:  # the simplest model within one (paired) standard error of the best
-        chosen = next(t for t in cv if t.excess_px2 <= t.se_excess_px2)
+        allowed = [t for t in cv if t.degree_gain >= cfg.min_degree_gain]
+        chosen = next((t for t in allowed if t.excess_px2 <= t.se_excess_px2), allowed[0])
         deg_o, deg_g = chosen.degree_offset, chosen.degree_gain
     else:
-        deg_o, deg_g = 0, -1
+        deg_o, deg_g = 0, min(cfg.min_degree_gain, 0) if len(c) >= 3 else -1
     A = frame.design(q, deg_o, deg_g)
     coef, w = _robust_fit(A, c, cfg.loss, f)
     r = c - A @ coef

@@ -1,0 +1,176 @@
+"""The application phase (thesis §4.1, Fig. 4-2): depth of an ROI with its σ.
+
+Blocks, in order, each named as the thesis names it (§4.1.3) and each recorded in the result:
+
+1. **gates** — heated, fixed focus, orientation known (:mod:`~phonestereo.flows.gates`);
+2. **focus fix** — the refocus stack's scale/offset correction when one is given (Fig. 4-1);
+3. **features in the ROI matched into the tele → majority disparity → ROI expansion →
+   majority again → W-T scale in the ROI** (:func:`~phonestereo.flows.roi_disparity.measure_roi`);
+4. **fix disparity** — the learned correction at each ROI point (x, y, d), keyed by the
+   orientation bucket, and the learned gate (enough observations);
+5. **majority depth** — Z over the ROI grid (the rectified ray of each ROI pixel at its
+   corrected disparity, depth along the wide's optical axis), the median, and σ from the
+   matching bound (the plane fit over Cramér–Rao-weighted matches), the W-T scale's σ and the
+   correction's σ.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.focus_stack import FocusCorrection
+from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
+from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
+from phonestereo.io import Calibration, CaptureEntry
+from phonestereo.learning.learn import capture_orientation
+
+
+@dataclass(frozen=True)
+class ApplicationInputs:
+    """One capture to measure.
+
+    Attributes
+    ----------
+    calibration : Calibration
+    entry : CaptureEntry
+        Its manifest entry (time, gravity, focus mode, ROI).
+    image_wide, image_tele : ndarray
+        Decoded images.
+    corrector : Corrector or None
+        The learned correction (None: no store → the learned gate fails unless the learned
+        correction is switched off).
+    roi : (x, y, w, h) or None
+        Raw wide pixels; default the entry's ROI.
+    focus : FocusCorrection or None
+        The refocus stack's correction for this attempt (Fig. 4-1).
+    """
+
+    calibration: Calibration
+    entry: CaptureEntry
+    image_wide: Any
+    image_tele: Any
+    corrector: Corrector | None = None
+    roi: tuple[int, int, int, int] | None = None
+    focus: FocusCorrection | None = None
+
+
+@dataclass(frozen=True)
+class DepthResult:
+    """The application phase's answer for one capture.
+
+    ``ok`` False: ``gate`` names the gate (or ``"measure"`` / ``"correction"``) and ``reason``
+    says why; ``depth_m`` is then NaN — never a silent number.
+    """
+
+    capture_id: str
+    ok: bool
+    depth_m: float
+    sigma_m: float
+    gate: str = ""
+    reason: str = ""
+    disparity_px: float = float("nan")
+    disparity_fixed_px: float = float("nan")
+    correction_px: float = float("nan")
+    depth_uncorrected_m: float = float("nan")
+    stages: dict[str, Any] = field(default_factory=dict)
+    gates: tuple[Gate, ...] = ()
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+
+        def num(v: float) -> float | None:
+            return None if not np.isfinite(v) else round(float(v), 6)
+
+        return {
+            "capture_id": self.capture_id, "ok": self.ok, "depth_m": num(self.depth_m),
+            "sigma_m": num(self.sigma_m), "gate": self.gate, "reason": self.reason,
+            "disparity_px": num(self.disparity_px),
+            "disparity_fixed_px": num(self.disparity_fixed_px),
+            "correction_px": num(self.correction_px),
+            "depth_uncorrected_m": num(self.depth_uncorrected_m),
+            "gates": [g.to_dict() for g in self.gates], "stages": self.stages,
+            "seconds": round(self.seconds, 4),
+        }  # fmt: skip
+
+
+def _gated(cid: str, gate: str, reason: str, gates: list[Gate], **kw: Any) -> DepthResult:
+    nan = float("nan")
+    return DepthResult(cid, False, nan, nan, gate, reason, gates=tuple(gates), **kw)
+
+
+def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
+    """Run the application phase on one capture (Fig. 4-2); see the module docstring."""
+    t0 = time.perf_counter()
+    entry = inputs.entry
+    gates = capture_gates(entry, warmup_s=config.warmup_s, heating=config.heating_gate)
+    bad = first_failed(gates)
+    if bad is not None:
+        return _gated(entry.id, bad.name, bad.reason, gates, seconds=time.perf_counter() - t0)
+    orientation = capture_orientation(entry)
+    if config.learned_correction:
+        n = 0 if inputs.corrector is None else inputs.corrector.count(orientation)
+        g = learned_gate(n, config.min_observations, orientation)
+        gates.append(g)
+        if not g.passed:
+            return _gated(entry.id, g.name, g.reason, gates, seconds=time.perf_counter() - t0)
+    roi = inputs.roi or entry.roi
+    if roi is None:
+        return _gated(entry.id, "roi", "no ROI given (--roi x,y,w,h or the manifest's roi)", gates)
+    stages: dict[str, Any] = {}
+    rig = inputs.calibration.rig
+    if config.focus_calibration and inputs.focus is not None:
+        rig = inputs.focus.apply(rig)
+        stages["focus_fix"] = inputs.focus.to_dict()
+    ref = reference_rectification(inputs.calibration.rig, config.mode)
+    box = (int(roi[0]), int(roi[1]), int(roi[2]), int(roi[3]))
+    m = measure_roi(rig, inputs.image_wide, inputs.image_tele, box, config.roi, ref)
+    stages["measure"] = {"counts": m.counts, "ok": m.ok, "reason": m.reason}
+    if m.wt is not None:
+        stages["wt_scale"] = m.wt.to_dict()
+    if not m.ok or m.plane is None:
+        return _gated(
+            entry.id, "measure", m.reason, gates, stages=stages, seconds=time.perf_counter() - t0
+        )
+    d_grid, sd_grid = m.plane.predict(m.roi_grid)
+    stages["majority_disparity_px"] = round(m.majority_px, 5)
+    z_raw = ref.backproject(m.roi_grid, d_grid)[:, 2]
+    corr_v = np.zeros(len(d_grid))
+    corr_s = np.zeros(len(d_grid))
+    if config.learned_correction and inputs.corrector is not None:
+        c = inputs.corrector.correct(np.column_stack([m.roi_grid, d_grid]), orientation)
+        if not c.ok or not np.isfinite(c.value_px).all():
+            return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
+                          stages=stages, seconds=time.perf_counter() - t0)  # fmt: skip
+        corr_v, corr_s = c.value_px, c.sigma_px
+        stages["correction"] = {
+            "strategy": c.strategy, "median_px": round(float(np.median(corr_v)), 5),
+            "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
+        }  # fmt: skip
+    d_fix = d_grid + corr_v
+    z = ref.backproject(m.roi_grid, d_fix)[:, 2]
+    k = int(np.argsort(z)[len(z) // 2])  # the median grid point
+    depth = float(np.median(z))
+    sigma_wt = 0.0
+    if m.wt is not None and m.wt.ok:
+        x_t = m.roi_grid[k, 0] - d_grid[k]
+        sigma_wt = float(m.wt.sigma_scale * abs(x_t - m.wt.center_px[0]))
+    sigma_d = float(np.sqrt(sd_grid[k] ** 2 + sigma_wt**2 + corr_s[k] ** 2))
+    sigma_z = depth * sigma_d / max(float(d_fix[k]), 1e-9)
+    stages["sigma_px"] = {
+        "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
+        "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),
+    }  # fmt: skip
+    return DepthResult(
+        entry.id, True, depth, sigma_z, "", "",
+        float(np.median(d_grid)), float(np.median(d_fix)), float(np.median(corr_v)),
+        float(np.median(z_raw)), stages, tuple(gates), time.perf_counter() - t0,
+    )  # fmt: skip
+
+
+__all__ = ["ApplicationInputs", "DepthResult", "run"]

@@ -1,0 +1,144 @@
+"""Configuration of the Phase 0 flows (thesis chapter 4) and the learned-correction lookup.
+
+One :class:`FlowConfig` drives the learning and the application phase alike, so that what was
+learned is applied under the same conventions. Every chapter-3 fix has a switch (the ablation
+table of the bench switches them off one at a time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.flows.roi_disparity import RoiConfig
+from phonestereo.learning.field import FieldConfig, FieldLookup
+from phonestereo.learning.lookup import STRATEGIES, DictionaryLookup
+from phonestereo.learning.observation import Correction, as_observation_array
+
+#: Lookup strategies: the smooth field (default, beyond the thesis) and Figure 3-31's.
+LOOKUPS = ("field", *STRATEGIES)
+
+#: The fixes that can be switched off, in the order of the ablation table.
+FIXES = (
+    "heating_gate",
+    "focus_calibration",
+    "wt_scale",
+    "canonical",
+    "orientation_buckets",
+    "learned_correction",
+)
+
+
+@dataclass(frozen=True)
+class FlowConfig:
+    """Switches and parameters of the learning and application flows.
+
+    Attributes
+    ----------
+    warmup_s : float
+        Heated gate: seconds since the camera started (thesis: ~3 min, §3.1).
+    heating_gate, focus_calibration, wt_scale, canonical, orientation_buckets,
+    learned_correction : bool
+        The fixes (all on by default): the warm-up gate (§3.1), the refocus-stack focus
+        calibration (Fig. 4-1, §3.5.3), the W-T scale (§3.5.1), canonical rectification
+        (§3.3; off = ``tele-to-wide``), orientation-keyed fixes (§3.4), the learned
+        correction from faces (§3.6).
+    lookup : str
+        One of :data:`LOOKUPS`.
+    min_observations : int
+        The learned gate: fewest observations in the capture's bucket.
+    roi : RoiConfig
+    """
+
+    warmup_s: float = 180.0
+    heating_gate: bool = True
+    focus_calibration: bool = True
+    wt_scale: bool = True
+    canonical: bool = True
+    orientation_buckets: bool = True
+    learned_correction: bool = True
+    lookup: str = "field"
+    min_observations: int = 10
+    roi: RoiConfig = field(default_factory=RoiConfig)
+
+    def __post_init__(self) -> None:
+        if self.lookup not in LOOKUPS:
+            raise InputError(f"unknown lookup {self.lookup!r}; choose one of {list(LOOKUPS)}")
+        if not self.warmup_s >= 0:
+            raise InputError(f"warmup_s must be >= 0 seconds, got {self.warmup_s}")
+        roi = replace(self.roi, mode=self.mode, wt_scale=self.wt_scale)
+        object.__setattr__(self, "roi", roi)
+
+    @property
+    def mode(self) -> str:
+        """Rectification mode the fixes imply."""
+        return "canonical" if self.canonical else "tele-to-wide"
+
+    def without(self, fix: str) -> FlowConfig:
+        """A copy with one fix of :data:`FIXES` switched off."""
+        if fix not in FIXES:
+            raise InputError(f"unknown fix {fix!r}; choose one of {list(FIXES)}")
+        changes: dict[str, Any] = {fix: False}
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary."""
+        return {
+            "warmup_s": self.warmup_s, "lookup": self.lookup,
+            "min_observations": self.min_observations, "mode": self.mode,
+            **{f: getattr(self, f) for f in FIXES},
+        }  # fmt: skip
+
+
+ALL_BUCKETS = "all"
+
+
+class Corrector:
+    """The learned correction of a store's observations under a :class:`FlowConfig`.
+
+    Wraps :class:`~phonestereo.learning.field.FieldLookup` or
+    :class:`~phonestereo.learning.lookup.DictionaryLookup`; with orientation buckets off all
+    observations share one bucket.
+    """
+
+    def __init__(
+        self, observations: Any, config: FlowConfig, principal_point_px: Any = None
+    ) -> None:
+        obs = as_observation_array(observations).copy()
+        if not config.orientation_buckets and obs.size:
+            obs["orientation"] = ALL_BUCKETS
+        self.observations = obs
+        self.config = config
+        pp: tuple[float, float] | None = None
+        if principal_point_px is not None:
+            pp = (float(principal_point_px[0]), float(principal_point_px[1]))
+        self._lookup: Any
+        if config.lookup == "field":
+            self._lookup = FieldLookup(obs, pp, FieldConfig(min_degree_gain=0))
+        else:
+            self._lookup = DictionaryLookup(obs, pp)
+
+    def bucket(self, orientation: str) -> str:
+        """The bucket a capture of ``orientation`` is corrected in."""
+        return orientation if self.config.orientation_buckets else ALL_BUCKETS
+
+    def count(self, orientation: str) -> int:
+        """Observations in the capture's bucket."""
+        if self.observations.size == 0:
+            return 0
+        return int(np.sum(self.observations["orientation"] == self.bucket(orientation)))
+
+    def correct(self, query: Any, orientation: str) -> Correction:
+        """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels."""
+        b = self.bucket(orientation)
+        if self.config.lookup == "field":
+            c: Correction = self._lookup.correct(query, b)
+        else:
+            c = self._lookup.correct(query, b, self.config.lookup)
+        return c
+
+
+__all__ = ["ALL_BUCKETS", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]

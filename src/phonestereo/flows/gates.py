@@ -1,0 +1,96 @@
+"""The gates of the Phase 0 flows (thesis §4.1.1): heated, fixed focus, orientation known,
+enough learned observations. A gated-out request is a result naming the gate and why.
+
+Each gate is a small function of a capture's manifest entry (and, for the last, the store's
+count), returning a :class:`Gate`; :func:`capture_gates` runs the capture gates in the order
+of Fig. 4-2 / 4-3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from phonestereo.fixes.heating import WarmupGate
+from phonestereo.io import CaptureEntry
+from phonestereo.learning.learn import capture_orientation
+
+
+@dataclass(frozen=True)
+class Gate:
+    """One gate's decision: ``name``, ``passed`` and, when not, ``reason``."""
+
+    name: str
+    passed: bool
+    reason: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"gate": self.name, "passed": self.passed, "reason": self.reason}
+
+
+def heated_gate(entry: CaptureEntry, warmup_s: float) -> Gate:
+    """§3.1: the module must be warm (time since the camera started ≥ ``warmup_s``)."""
+    g = WarmupGate(min_time_s=warmup_s).check({"time_s": entry.time_s})
+    return Gate("heated", g.passed, "" if g.passed else f"cold capture: {g.reason}")
+
+
+def fixed_focus_gate(entry: CaptureEntry) -> Gate:
+    """§3.5: a manual (locked) focus; an autofocus capture may have refocused anywhere."""
+    if entry.focus_mode != "manual":
+        return Gate(
+            "fixed-focus", False,
+            "autofocus capture: the lens may sit anywhere (§3.5.2); lock a manual focus",
+        )  # fmt: skip
+    return Gate("fixed-focus", True)
+
+
+def orientation_gate(entry: CaptureEntry) -> Gate:
+    """§3.4: the orientation bucket must be known (gravity or an orientation label)."""
+    if capture_orientation(entry) == "unknown":
+        return Gate(
+            "orientation", False,
+            "no gravity vector or orientation label: the orientation bucket is unknown (§3.4)",
+        )  # fmt: skip
+    return Gate("orientation", True)
+
+
+def learned_gate(n_observations: int, min_observations: int, bucket: str) -> Gate:
+    """§4.1.1: enough learned observations in the capture's orientation bucket."""
+    if n_observations < min_observations:
+        return Gate(
+            "learned", False,
+            f"{n_observations} learned observations in orientation bucket '{bucket}' (< "
+            f"{min_observations}); run `phonestereo learn` on face captures in this "
+            "orientation first",
+        )  # fmt: skip
+    return Gate("learned", True)
+
+
+def capture_gates(
+    entry: CaptureEntry, *, warmup_s: float, heating: bool = True, focus: bool = True
+) -> list[Gate]:
+    """The capture gates in order (heated, fixed focus, orientation); switched-off gates are
+    reported as passed with the reason "off"."""
+    gates = [
+        heated_gate(entry, warmup_s) if heating else Gate("heated", True, "off"),
+        fixed_focus_gate(entry) if focus else Gate("fixed-focus", True, "off"),
+        orientation_gate(entry),
+    ]
+    return gates
+
+
+def first_failed(gates: list[Gate]) -> Gate | None:
+    """The first gate that did not pass, or None."""
+    return next((g for g in gates if not g.passed), None)
+
+
+__all__ = [
+    "Gate",
+    "capture_gates",
+    "first_failed",
+    "fixed_focus_gate",
+    "heated_gate",
+    "learned_gate",
+    "orientation_gate",
+]
