@@ -23,6 +23,7 @@ QUICK_COUNTS = {
     "refocus": 2,
     "orientation": 2,
     "dual-depth": 2,
+    "handheld": 3,
     "learning": 4,
     "verification": 4,
     "thesis-bench": 8,

@@ -9,6 +9,9 @@ landscape; charts face the device.
 ``heating``      tripod, static verification chart, a capture every 10 s for 10 min from
                  cold, focus locked (§3.1)
 ``refocus``      tripod, verification chart, 7 manual refocus attempts, heated (§3.5.3)
+``handheld``     handheld, verification chart at 1, 1.5, 2.5 m, a 5-attempt manual refocus
+                 stack at each, heated (§3.5.3, Figure 3-27); ``refocus`` with
+                 ``StackConfig(handheld=True)`` is a single handheld stack
 ``orientation``  tripod, the same chart in landscape and flipped by 180°, heated (§3.4)
 ``dual-depth``   tripod, two verification charts at two depths, 7 attempts (§3.3, §3.5.2)
 ``learning``     face chart at 1–3 m at several sensor positions, handheld, heated, each a
@@ -87,6 +90,7 @@ class StackConfig:
     attempts: int = 7
     focus_mode: Literal["manual", "auto"] = "manual"
     timing: Timing = Timing()
+    handheld: bool = False
 
     @classmethod
     def quick(cls) -> StackConfig:
@@ -102,6 +106,20 @@ class OrientationConfig(StackConfig):
     @classmethod
     def quick(cls) -> OrientationConfig:
         return cls(attempts=1)
+
+
+@dataclass(frozen=True)
+class HandheldConfig(StackConfig):
+    """Handheld refocus stacks of the chart at each of ``distances_m`` (thesis Figure 3-27);
+    ``distance_m`` is not used."""
+
+    distances_m: tuple[float, ...] = (1.0, 1.5, 2.5)
+    attempts: int = 5
+    handheld: bool = True
+
+    @classmethod
+    def quick(cls) -> HandheldConfig:
+        return cls(distances_m=(1.5,), attempts=3)
 
 
 @dataclass(frozen=True)
@@ -221,7 +239,17 @@ def plan_heating(module: ModuleSpec, seed: int, cfg: HeatingConfig) -> Plan:
 def plan_refocus(module: ModuleSpec, seed: int, cfg: StackConfig) -> Plan:
     p = Planner("refocus", module, seed, f"tripod, {cfg.attempts} {cfg.focus_mode} focus attempts")
     scene = _verification_scene(module, cfg.distance_m, np.zeros(3))
-    _stack(p, scene, cfg, "r00", cfg.timing.start_s)
+    _stack(p, scene, cfg, "r00", cfg.timing.start_s, handheld=cfg.handheld)
+    return p.plan()
+
+
+def plan_handheld(module: ModuleSpec, seed: int, cfg: HandheldConfig) -> Plan:
+    hold = "handheld" if cfg.handheld else "tripod"
+    p = Planner("handheld", module, seed, f"{hold}, refocus stacks at {list(cfg.distances_m)} m")
+    t = cfg.timing.start_s
+    for i, d in enumerate(cfg.distances_m):
+        scene = _verification_scene(module, d, np.zeros(3))
+        t = _stack(p, scene, cfg, f"H{i:02d}", t, handheld=cfg.handheld)
     return p.plan()
 
 
@@ -322,6 +350,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario("refocus", StackConfig, plan_refocus, "tripod, 7 refocus attempts"),
         Scenario("orientation", OrientationConfig, plan_orientation, "landscape and flipped"),
         Scenario("dual-depth", DualDepthConfig, plan_dual_depth, "two charts at two depths"),
+        Scenario("handheld", HandheldConfig, plan_handheld, "handheld refocus stacks, 1-2.5 m"),
         Scenario("learning", LearningConfig, plan_learning, "face chart at 1-3 m, stacks"),
         Scenario("verification", VerificationConfig, plan_verification, "chart at 0.8-4 m"),
         Scenario("thesis-bench", BenchConfig, plan_thesis_bench, "learning + verification"),

@@ -8,8 +8,8 @@ are imported only when run (Matplotlib is slow to import).
 
 Examples
 --------
->>> sorted(ANALYSES)
-['distortion', 'heating', 'repeatability', 'translation', 'wt-scale']
+>>> len(ANALYSES), sorted(ANALYSES)[:4]
+(8, ['distortion', 'essential', 'handheld', 'heating'])
 >>> ANALYSES["heating"].summary
 'warm-up drift of the disparity: fit A, τ, saturation time; warm-up gate (§3.1)'
 """
@@ -120,6 +120,29 @@ ANALYSES: dict[str, AnalysisSpec] = {
         "a refocus stack: >= 2 'verification' captures of one static chart on a tripod sharing "
         "a focus_group, e.g. `phonestereo simulate refocus`",
         "phonestereo.evaluation.analyses.repeatability:run",
+    ),
+    "orientation": AnalysisSpec(
+        "orientation",
+        "per-orientation disparity offset from gravity buckets (§3.4, Fig. 3-11)",
+        "'verification' captures of one static chart (tripod, heated) in >= 2 device "
+        "orientations, each with 'gravity' or an orientation label, e.g. "
+        "`phonestereo simulate orientation`",
+        "phonestereo.evaluation.analyses.orientation:run",
+    ),
+    "essential": AnalysisSpec(
+        "essential",
+        "essential-matrix focus scales (eq. 9) and the Fig. 3-26 variants vs the optimal "
+        "correction (§3.5.3)",
+        "a refocus stack: >= 2 'verification' captures of one static chart sharing a "
+        "'focus_group' (tripod, heated, manual focus), e.g. `phonestereo simulate refocus`",
+        "phonestereo.evaluation.analyses.essential:run",
+    ),
+    "handheld": AnalysisSpec(
+        "handheld",
+        "optimal scale correction on handheld refocus stacks (§3.5.3, Fig. 3-27)",
+        "handheld refocus stacks: >= 2 'verification' captures per 'focus_group', e.g. "
+        "`phonestereo simulate handheld`",
+        "phonestereo.evaluation.analyses.handheld:run",
     ),
 }
 
