@@ -10,6 +10,7 @@ from phonestereo.cli import analyze as _analyze  # noqa: F401  (registers comman
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401
 from phonestereo.cli import charts as _charts  # noqa: F401
 from phonestereo.cli import demo as _demo  # noqa: F401
+from phonestereo.cli import depth as _depth  # noqa: F401
 from phonestereo.cli import detect as _detect  # noqa: F401
 from phonestereo.cli import faces as _faces  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401

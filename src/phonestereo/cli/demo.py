@@ -1,13 +1,16 @@
-"""`phonestereo demo`: simulate the thesis bench on the virtual module and score it.
+"""`phonestereo demo`: the thesis bench on the virtual module, end to end (DESIGN §10).
 
-Until the Phase 0 flows land (issue #7), the demo simulates the verification scenario of the
-built-in `folded-x3` module, writes the capture set, and scores the naive Z = f·B/d stage
-against ground truth: the ~30 % error the thesis starts from.
+Simulates the thesis bench (learning from the face chart at 1–3 m, verification charts at
+0.8–4 m; heated, manual focus at 1.5 m, handheld) on a built-in module with every effect of
+DESIGN §6, runs the learning and the application phases, and prints the relative depth error
+per distance for each stage — naive Z = f·B/d, the fixes without the learned correction, the
+full flow — beside the Cramér–Rao floor, and writes an HTML report with the figures.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 from typing import Annotated
@@ -15,70 +18,72 @@ from typing import Annotated
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from phonestereo.cli.app import app
-from phonestereo.evaluation.summary import score_capture_set
+from phonestereo.cli.depth import clean, print_bench
+from phonestereo.evaluation.bench import run_bench
+from phonestereo.report.bench_report import write_report
 from phonestereo.sim.module import load_module
-from phonestereo.sim.scenarios import VerificationConfig, plan_scenario
+from phonestereo.sim.scenarios import BenchConfig, LearningConfig, VerificationConfig, plan_scenario
 from phonestereo.sim.writer import write_capture_set
+
+#: The quick bench: 4 face-chart distances × 5 sensor positions × 2 attempts, 9 verification
+#: distances × 2 attempts (58 captures; ≤ 90 s on 2 cores).
+QUICK = BenchConfig(
+    LearningConfig(distances_m=(1.0, 1.5, 2.0, 3.0), attempts=2), VerificationConfig(attempts=2)
+)
 
 
 @app.command()
 def demo(
-    out: Annotated[Path, typer.Option(help="Folder for the simulated capture set.")] = Path(
+    out: Annotated[Path, typer.Option(help="Folder for the capture set and report.")] = Path(
         "demo_out"
     ),
     module: Annotated[str, typer.Option(help="Module preset or JSON file.")] = "folded-x3",
-    full: Annotated[bool, typer.Option(help="The complete scenario (slower).")] = False,
+    full: Annotated[
+        bool, typer.Option(help="The complete bench (5 attempts per stack) and the ablations.")
+    ] = False,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    workers: Annotated[int, typer.Option(help="Rendering processes.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
 ) -> None:
-    """Simulate verification captures on the virtual module and score the naive depth.
+    """Simulate the thesis bench, learn, apply and score every stage against ground truth.
 
-    Renders real images with every effect of the module (heating, focus breathing, odd
-    distortion, non-baseline translation, sag, handheld motion, factory-calibration error,
-    sensor noise), writes the capture set to --out, and prints the relative depth error of
-    the naive Z = f·B/d per distance. Later stages (each chapter-3 fix, the learned
-    correction) are added to the same table as they land.
+    Writes the capture set (images, manifest, factory calibration, ground truth) and
+    report.html (error vs distance per stage, rendered captures with their ROIs, the learned
+    correction over the sensor; with --full the ablation table) into --out.
     """
     t0 = time.perf_counter()
     spec = load_module(module)
-    # Default: every distance of the bench, 2 refocus attempts each (~20 s); --full: 5 attempts.
-    config = None if full else VerificationConfig(attempts=2)
-    plan = plan_scenario("verification", spec, seed, config=config)
+    config = BenchConfig() if full else QUICK
+    plan = plan_scenario("thesis-bench", spec, seed, config=config)
     console = Console(stderr=True)
-    columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    with Progress(*columns, console=console, disable=as_json) as bar:
-        task = bar.add_task("render", total=len(plan.captures))
+    n_workers = workers or min(2, os.cpu_count() or 1)
+    cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+            TimeElapsedColumn())  # fmt: skip
+    with Progress(*cols, console=console, disable=as_json, transient=True) as bar:
+        task = bar.add_task("rendering", total=len(plan.captures))
         write_capture_set(
-            out, plan, progress=lambda done, total, cid: bar.update(task, completed=done)
-        )
-    scores = score_capture_set(out)
-    scores["seconds"] = time.perf_counter() - t0
-    scores["module"] = spec.name
-    scores["out"] = str(out)
+            out, plan, workers=n_workers,
+            progress=lambda done, total, cid: bar.update(task, completed=done),
+        )  # fmt: skip
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(task, description=stage, completed=done, total=total)
+
+        res = run_bench(out, ablations=full, progress=progress)
+    res["module"] = spec.name
+    report = write_report(res, out / "report.html", title=f"phonestereo demo: {spec.name}")
+    res["report"] = str(report)
+    res["total_seconds"] = round(time.perf_counter() - t0, 2)
     if as_json:
-        typer.echo(json.dumps(scores))
+        typer.echo(json.dumps(clean(res)))
         return
-    table = Table(
-        title=f"relative depth error, {spec.name}, {scores['captures']} verification "
-        "captures (per capture: median over chart corners)"
+    print_bench(
+        res,
+        f"relative depth error per verification capture, {spec.name} "
+        f"({len(res['captures'])} captures, {res['learning']['n_observations']} learned faces)",
     )
-    table.add_column("distance")
-    table.add_column("naive median", justify="right")
-    table.add_column("naive p90", justify="right")
-    for row in scores["per_distance"]:
-        s = row["stages"]["naive"]
-        table.add_row(
-            f"{row['distance_m']:.1f} m",
-            f"{100 * s['median_rel_err']:.1f} %",
-            f"{100 * s['p90_rel_err']:.1f} %",
-        )
-    s = scores["stages"]["naive"]
-    table.add_row("all", f"{100 * s['median_rel_err']:.1f} %", f"{100 * s['p90_rel_err']:.1f} %")
-    Console().print(table)
     Console().print(
-        f"capture set written to {out} ({scores['seconds']:.1f} s). "
-        "The fixes and the learned correction come with the Phase 0 flows."
+        f"capture set and report in {out} ({report.name}); {res['total_seconds']:.0f} s in all"
     )

@@ -120,6 +120,39 @@ class Corrector:
             self._lookup = FieldLookup(obs, pp, FieldConfig(min_degree_gain=0))
         else:
             self._lookup = DictionaryLookup(obs, pp)
+        self.capture_sigma_px = self._capture_scatter()
+
+    def _capture_scatter(self) -> float:
+        """Capture-to-capture scatter of the learned observations about the correction, px.
+
+        The per-capture mean residual (observations of one capture share its focus state,
+        W-T fit and heating) robustly spread over captures: how far a *new* capture may sit
+        from the learned correction, beyond the correction's own fit uncertainty.
+        """
+        obs = self.observations
+        if obs.size == 0:
+            return 0.0
+        means = []
+        for b in np.unique(obs["orientation"]):
+            ob = obs[obs["orientation"] == b]
+            q = np.column_stack([ob["x_px"], ob["y_px"], ob["d_measured_px"]])
+            c = self._raw_correct(q, str(b))
+            r = (ob["d_expected_px"] - ob["d_measured_px"]) - c.value_px
+            for cid in np.unique(ob["capture_id"]):
+                m = ob["capture_id"] == cid
+                if np.isfinite(r[m]).any():
+                    means.append(float(np.nanmean(r[m])))
+        if len(means) < 4:
+            return 0.0
+        m = np.asarray(means)
+        return float(1.4826 * np.median(np.abs(m - np.median(m))))
+
+    def _raw_correct(self, query: Any, bucket: str) -> Correction:
+        if self.config.lookup == "field":
+            c: Correction = self._lookup.correct(query, bucket)
+        else:
+            c = self._lookup.correct(query, bucket, self.config.lookup)
+        return c
 
     def bucket(self, orientation: str) -> str:
         """The bucket a capture of ``orientation`` is corrected in."""
@@ -133,12 +166,11 @@ class Corrector:
 
     def correct(self, query: Any, orientation: str) -> Correction:
         """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels."""
-        b = self.bucket(orientation)
-        if self.config.lookup == "field":
-            c: Correction = self._lookup.correct(query, b)
-        else:
-            c = self._lookup.correct(query, b, self.config.lookup)
-        return c
+        c = self._raw_correct(query, self.bucket(orientation))
+        if not c.ok:
+            return c
+        sigma = np.sqrt(c.sigma_px**2 + self.capture_sigma_px**2)
+        return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason)
 
 
 __all__ = ["ALL_BUCKETS", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]

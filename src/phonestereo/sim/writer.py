@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from phonestereo.errors import InputError
 from phonestereo.io import save_calibration, write_image, write_manifest
@@ -40,12 +42,23 @@ class WriteResult:
     files: tuple[str, ...]
 
 
+def _render_one(job: tuple[Any, ...]) -> str:
+    """Render and write one capture (a process-pool job)."""
+    module, state, scene, seed, scenario, index, path_wide, path_tele = job
+    rng = stream(seed, scenario, STREAM_RENDER, index)
+    wide, tele = render_capture(module, state, scene, rng)
+    write_image(path_wide, wide)
+    write_image(path_tele, tele)
+    return str(state.id)
+
+
 def write_capture_set(
     out_dir: str | os.PathLike[str],
     plan: Plan,
     *,
     render: bool = True,
     progress: Progress | None = None,
+    workers: int = 1,
 ) -> WriteResult:
     """Render and write a planned scenario as a capture set.
 
@@ -59,6 +72,9 @@ def write_capture_set(
         False writes the JSON files only (fast; images are then missing).
     progress : callable, optional
         Called as ``progress(done, total, capture_id)`` after each capture.
+    workers : int
+        Processes rendering in parallel (each capture has its own random stream, so the bytes
+        do not depend on it).
 
     Returns
     -------
@@ -71,15 +87,24 @@ def write_capture_set(
     manifest = plan.manifest(IMAGE_DIR)
     files: list[str] = []
     total = len(plan.captures)
-    for pc, entry in zip(plan.captures, manifest.captures, strict=True):
-        if render:
-            rng = stream(plan.seed, plan.scenario, STREAM_RENDER, pc.index)
-            wide, tele = render_capture(plan.module, pc.state, pc.scene, rng)
-            write_image(folder / entry.wide, wide)
-            write_image(folder / entry.tele, tele)
-            files += [entry.wide, entry.tele]
-        if progress is not None:
-            progress(pc.index + 1, total, pc.state.id)
+    jobs = [
+        (plan.module, pc.state, pc.scene, plan.seed, plan.scenario, pc.index,
+         str(folder / entry.wide), str(folder / entry.tele))
+        for pc, entry in zip(plan.captures, manifest.captures, strict=True)
+    ]  # fmt: skip
+    if render:
+        files += [f for entry in manifest.captures for f in (entry.wide, entry.tele)]
+    if render and workers > 1:
+        with ProcessPoolExecutor(max_workers=int(workers)) as pool:
+            for done, cid in enumerate(pool.map(_render_one, jobs), start=1):
+                if progress is not None:
+                    progress(done, total, cid)
+    else:
+        for done, (job, pc) in enumerate(zip(jobs, plan.captures, strict=True), start=1):
+            if render:
+                _render_one(job)
+            if progress is not None:
+                progress(done, total, pc.state.id)
     save_calibration(folder / manifest.calibration, plan.calibration)
     write_manifest(folder, manifest)
     write_ground_truth(folder / GROUND_TRUTH_NAME, plan.ground_truth())
