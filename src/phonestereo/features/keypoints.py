@@ -73,6 +73,20 @@ def _select(
     return xs[pick], ys[pick], resp[pick]
 
 
+def _hessian_ok(
+    dog: F32, xs: NDArray[np.intp], ys: NDArray[np.intp], r: float
+) -> NDArray[np.bool_]:
+    """Lowe's test at the extrema: det(H) > 0 and tr(H)² / det(H) < (r + 1)² / r."""
+    c = dog[ys, xs]
+    dxx = dog[ys, xs + 1] + dog[ys, xs - 1] - 2 * c
+    dyy = dog[ys + 1, xs] + dog[ys - 1, xs] - 2 * c
+    dxy = 0.25 * (
+        dog[ys + 1, xs + 1] - dog[ys + 1, xs - 1] - dog[ys - 1, xs + 1] + dog[ys - 1, xs - 1]
+    )
+    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
+    return np.asarray((det > 0) & (tr * tr * r < (r + 1) ** 2 * det), dtype=bool)
+
+
 def detect_dog(
     image: F32,
     *,
@@ -134,21 +148,32 @@ def detect_dog(
     sub = img[ay : min(y1 + m, h), ax : min(x1 + m, w)]
     dog = cv2.GaussianBlur(sub, (0, 0), sigma) - cv2.GaussianBlur(sub, (0, 0), sigma * k)
     box = np.ones((3, 3), np.uint8)
-    ext = (dog == cv2.dilate(dog, box)) | (dog == cv2.erode(dog, box))
-    keep = np.zeros_like(ext)
     win = (slice(y0 - ay, y1 - ay), slice(x0 - ax, x1 - ax))
-    keep[win] = ext[win] & (np.abs(dog[win]) > threshold)
-    ys, xs = np.nonzero(keep)
-    c = dog[ys, xs]
-    dxx = dog[ys, xs + 1] + dog[ys, xs - 1] - 2 * c
-    dyy = dog[ys + 1, xs] + dog[ys - 1, xs] - 2 * c
-    dxy = 0.25 * (
-        dog[ys + 1, xs + 1] - dog[ys + 1, xs - 1] - dog[ys - 1, xs + 1] + dog[ys - 1, xs - 1]
+    dw, thr = dog[win], float(threshold)
+    ext = cv2.bitwise_or(  # 3 × 3 maximum or minimum, and |DoG| above the threshold
+        cv2.compare(dw, cv2.dilate(dog, box)[win], cv2.CMP_EQ),
+        cv2.compare(dw, cv2.erode(dog, box)[win], cv2.CMP_EQ),
     )
-    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
-    ok = (det > 0) & (tr * tr * edge_ratio < (edge_ratio + 1) ** 2 * det)
-    xs, ys = xs + ax, ys + ay
-    xs, ys, resp = _select(xs[ok], ys[ok], np.abs(c[ok]).astype(np.float64), max_keypoints, cell)
+    strong = cv2.bitwise_or(cv2.compare(dw, thr, cv2.CMP_GT), cv2.compare(dw, -thr, cv2.CMP_LT))
+    nz = cv2.findNonZero(cv2.bitwise_and(ext, strong))
+    if nz is None:
+        return Keypoints(np.zeros((0, 2)), np.zeros(0))
+    xs = nz[:, 0, 0].astype(np.intp) + (x0 - ax)
+    ys = nz[:, 0, 1].astype(np.intp) + (y0 - ay)
+    resp = np.abs(dog[ys, xs]).astype(np.float64)
+    want = 4 * max_keypoints  # _select picks among the strongest `want` that pass
+    if len(resp) > 2 * want:  # test the strongest first; the rest only if too few pass
+        top = np.argpartition(-resp, 2 * want)[: 2 * want]
+        ok = _hessian_ok(dog, xs[top], ys[top], edge_ratio)
+        if ok.sum() >= want:
+            xs, ys, resp = xs[top[ok]], ys[top[ok]], resp[top[ok]]
+        else:
+            ok = _hessian_ok(dog, xs, ys, edge_ratio)
+            xs, ys, resp = xs[ok], ys[ok], resp[ok]
+    else:
+        ok = _hessian_ok(dog, xs, ys, edge_ratio)
+        xs, ys, resp = xs[ok], ys[ok], resp[ok]
+    xs, ys, resp = _select(xs + ax, ys + ay, resp, max_keypoints, cell)
     return Keypoints(np.stack([xs, ys], axis=1).astype(np.float64), resp)
 
 

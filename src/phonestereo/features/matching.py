@@ -152,7 +152,7 @@ def match_rectified(
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
     ref = refine_lk(
         lc,
-        bspline_coefficients(lc),
+        None,  # the template gradients are filtered from the left windows directly
         bspline_coefficients(rc),
         xy[idx],
         s.d0[idx],

@@ -11,7 +11,8 @@ zero-mean NCC) with the right image over disparities ``[min_d, max_d]`` and rows
 * **left–right consistency**: the right window searched back along the left row must land
   within ``lr_tolerance`` px of the keypoint.
 
-The loop is over keypoints (not pixels); each search is one OpenCV call.
+The loop is over keypoints (not pixels): each search is one OpenCV call writing into one
+(N, rows, disparities) array; the peak, parabola and uniqueness tests are vectorised over it.
 """
 
 from __future__ import annotations
@@ -59,12 +60,26 @@ class SearchResult:
     lr_ok: NDArray[np.bool_]
 
 
-def _parabola(a: float, b: float, c: float) -> tuple[float, float]:
-    """Vertex offset and curvature −(a − 2b + c) of the parabola through (−1, a), (0, b), (1, c)."""
-    den = a - 2.0 * b + c
-    if den >= 0:
-        return 0.0, -den
-    return 0.5 * (a - c) / den, -den
+def _parabola(
+    c: F32,
+    k: NDArray[np.int64],
+    iy: NDArray[np.int64],
+    ix: NDArray[np.int64],
+    dy: int,
+    dx: int,
+    size: int,
+) -> tuple[F64, F64]:
+    """Vertex offset and curvature −(a − 2b + c) of the parabola through the peak and its two
+    neighbours along y (dy = 1) or x (dx = 1); offset 0 where it is not concave."""
+    along = iy if dy else ix
+    lo, hi = np.clip(along - 1, 0, size - 1), np.clip(along + 1, 0, size - 1)
+    b = c[k, iy, ix].astype(np.float64)
+    a = c[k, lo, ix] if dy else c[k, iy, lo]
+    e = c[k, hi, ix] if dy else c[k, iy, hi]
+    den = a - 2.0 * b + e
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(den < 0, 0.5 * (a - e) / den, 0.0)
+    return off, -den
 
 
 def ncc_search(
@@ -118,40 +133,49 @@ def ncc_search(
     >>> round(float(res.d0[0]), 1), abs(round(float(res.e0[0]), 1)), bool(res.lr_ok[0])
     (7.0, 0.0, True)
     """
-    n, r = len(xy), int(radius)
+    n, r, ty = len(xy), int(radius), int(row_tolerance)
     h, w = left.shape
-    # one row per keypoint: d0, e0, score, second, curvature_x, curvature_y, searched, edge, lr
-    rows = np.full((n, 9), np.nan)
-    rows[:, 6:] = 0.0
-    ty = int(row_tolerance)
-    pts = np.asarray(xy, dtype=np.int64).tolist()
+    pts = np.asarray(xy, dtype=np.int64).reshape(-1, 2)
+    nr, nc = 2 * ty + 1, max_d - min_d + 1
+    # NCC of every band in one array (n, rows, disparities), column j ↔ d = max_d − j;
+    # disparities whose window leaves the right image hold −1 (below any NCC)
+    cs = np.full((n, nr, nc), -1.0, np.float32)
+    lo, hi = np.zeros(n, np.int64), np.full(n, nc - 1)
+    searched = np.zeros(n, bool)
     ccoeff = cv2.TM_CCOEFF_NORMED
-    for i, (x, y) in enumerate(pts):
+    for i, (x, y) in enumerate(pts.tolist()):
         xa, xb = max(x - max_d - r, 0), min(x - min_d + r + 1, w)
-        ya, yb = y - ty - r, y + ty + r + 1
-        if xb - xa < 2 * r + 3 or ya < 0 or yb > h:
+        if xb - xa < 2 * r + 3 or y - ty - r < 0 or y + ty + r + 1 > h:
             continue
-        c = cv2.matchTemplate(
-            right[ya:yb, xa:xb], left[y - r : y + r + 1, x - r : x + r + 1], ccoeff
+        off = xa - (x - max_d - r)
+        cols = xb - xa - 2 * r
+        cv2.matchTemplate(
+            right[y - ty - r : y + ty + r + 1, xa:xb],
+            left[y - r : y + r + 1, x - r : x + r + 1],
+            ccoeff,
+            result=cs[i, :, off : off + cols],
         )
-        _, best, _, (ix, iy) = cv2.minMaxLoc(c)
-        nr, nc = c.shape
-        inner = 0 < ix < nc - 1 and (ty == 0 or 0 < iy < nr - 1)
-        if inner:
-            fx, cx = _parabola(float(c[iy, ix - 1]), best, float(c[iy, ix + 1]))
-            fy, cy = (
-                _parabola(float(c[iy - 1, ix]), best, float(c[iy + 1, ix])) if ty else (0.0, np.nan)
-            )
-        c[:, max(ix - exclusion, 0) : ix + exclusion + 1] = -1.0
-        second = cv2.minMaxLoc(c)[1]
-        if not inner:
-            rows[i, 2:4], rows[i, 6:8] = (best, second), (1.0, 1.0)
-            continue
-        xr, yr = xa + r + ix, ya + r + iy
-        rows[i, :8] = (x - (xr + fx), y - (yr + fy), best, second, cx, cy, 1.0, 0.0)
-        if best < lr_min_score or second >= lr_uniqueness * best:
-            continue
-        # left–right: the right window back along the left row y
+        lo[i], hi[i], searched[i] = off, off + cols - 1, True
+    k = np.arange(n)
+    flat = cs.reshape(n, -1).argmax(axis=1)
+    iy, ix = flat // nc, flat % nc
+    best = cs[k, iy, ix].astype(np.float64)
+    inner = searched & (lo < ix) & (ix < hi) & ((ty == 0) | ((0 < iy) & (iy < nr - 1)))
+    fx, cx = _parabola(cs, k, iy, ix, 0, 1, nc)
+    if ty:
+        fy, cy = _parabola(cs, k, iy, ix, 1, 0, nr)
+    else:
+        fy, cy = np.zeros(n), np.full(n, np.nan)
+    far = np.abs(np.arange(nc)[None, :] - ix[:, None]) > exclusion  # (n, nc)
+    second = np.where(far[:, None, :], cs, -1.0).reshape(n, -1).max(axis=1).astype(np.float64)
+    nan = np.full(n, np.nan)
+    d0 = np.where(inner, max_d - ix - fx, nan)
+    e0 = np.where(inner, ty - iy - fy, nan)
+    lr_ok = np.zeros(n, bool)
+    lr_run = inner & (best >= lr_min_score) & ~(second >= lr_uniqueness * best)
+    for i in np.flatnonzero(lr_run).tolist():  # the right window back along the left row y
+        x, y = int(pts[i, 0]), int(pts[i, 1])
+        xr, yr = x - max_d + int(ix[i]), y - ty + int(iy[i])
         la, lb = max(xr + min_d - r, 0), min(xr + max_d + r + 1, w)
         if lb - la >= 2 * r + 1:
             back = cv2.matchTemplate(
@@ -159,15 +183,15 @@ def ncc_search(
                 right[yr - r : yr + r + 1, xr - r : xr + r + 1],
                 ccoeff,
             )
-            rows[i, 8] = abs(la + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
+            lr_ok[i] = abs(la + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
     return SearchResult(
-        searched=rows[:, 6] > 0,
-        d0=rows[:, 0].copy(),
-        e0=rows[:, 1].copy(),
-        score=rows[:, 2].copy(),
-        second=rows[:, 3].copy(),
-        curvature_x=rows[:, 4].copy(),
-        curvature_y=rows[:, 5].copy(),
-        at_edge=rows[:, 7] > 0,
-        lr_ok=rows[:, 8] > 0,
+        searched=searched,
+        d0=d0,
+        e0=e0,
+        score=np.where(searched, best, nan),
+        second=np.where(searched, second, nan),
+        curvature_x=np.where(inner, cx, nan),
+        curvature_y=np.where(inner, cy, nan),
+        at_edge=searched & ~inner,
+        lr_ok=lr_ok,
     )

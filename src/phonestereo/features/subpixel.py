@@ -13,10 +13,10 @@ surface, so that ``d`` at the window centre is not biased by the slant. Conventi
 
 The Jacobian is taken from the left window's own spline gradients (at the solution
 ``a·∂R/∂x·(1 − s_x) = ∂L/∂x``), as in inverse-compositional / ESM alignment: only values of R
-are resampled per iteration, the normal equations are assembled from fixed per-window moments
-(:func:`_basis_gram`) plus the resampled values, and the fit converges in 2–3 iterations from
-the NCC start. The fixed point is the same as with R's own gradients (the residual vanishes
-there for noise-free data).
+are resampled per iteration, the normal equations and their right side are assembled from
+fixed per-window moments plus five dot products with the resampled values (no residual image),
+and the fit converges in 2–3 iterations from the NCC start. The fixed point is the same as
+with R's own gradients (the residual vanishes there for noise-free data).
 
 Pixel locking: R is evaluated by exact cubic B-spline interpolation (coefficients from the
 recursive prefilter of Unser et al., applied as a 21-tap FIR whose truncation error is < 1e-6 of
@@ -76,12 +76,12 @@ def _weights(f: F32) -> F32:
 
 
 def _block(coef: F32, iy: I64, c0: I64, rows: int, cols: int) -> tuple[F32, NDArray[np.bool_]]:
-    """Blocks coef[iy + i, c0 + j] (n, rows, cols), clipped; ok = fully inside the image."""
+    """Blocks coef[iy + i, c0 + j] (n, rows, cols), moved inside; ok = fully inside the image."""
     h, w = coef.shape
-    r = iy[:, None] + np.arange(rows)[None, :]
-    c = c0[:, None] + np.arange(cols)[None, :]
-    ok = (r[:, 0] >= 0) & (r[:, -1] < h) & (c[:, 0] >= 0) & (c[:, -1] < w)
-    return coef[np.clip(r, 0, h - 1)[:, :, None], np.clip(c, 0, w - 1)[:, None, :]], ok
+    ok = (iy >= 0) & (iy + rows <= h) & (c0 >= 0) & (c0 + cols <= w)
+    start = np.clip(iy, 0, h - rows) * w + np.clip(c0, 0, w - cols)
+    offs = np.arange(rows)[:, None] * w + np.arange(cols)[None, :]
+    return np.take(coef.ravel(), start[:, None, None] + offs[None]), ok
 
 
 def sample_windows(
@@ -176,84 +176,81 @@ def gaussian_window(radius: int, sigma_w: float) -> F64:
     return np.exp(-0.5 * (u[:, None] ** 2 + u[None, :] ** 2) / float(sigma_w) ** 2)
 
 
-def _windows(img: F32, x0: I64, y0: I64, r: int) -> F32:
-    u = np.arange(-r, r + 1)
-    out = img[y0[:, None, None] + u[None, :, None], x0[:, None, None] + u[None, None, :]]
-    return np.ascontiguousarray(out.reshape(len(x0), -1), dtype=np.float32)
+def _derivative_fir(r: int) -> F32:
+    """(M + 2T, M) matrix D with (row of image) @ D = spline ∂/∂x at the M window pixels.
+
+    The spline's y smoothing undoes its y prefilter, so ∂L/∂x at the integers is the image
+    filtered along x only by prefilter ∗ central difference (2T + 1 taps, T = taps + 1).
+    """
+    t, m = _TAPS + 1, 2 * r + 1
+    k = np.pad(_PREFILTER / _PREFILTER.sum(), 1)
+    kd = 0.5 * (np.roll(k, 1) - np.roll(k, -1))  # tap o: 0.5·(k[o − 1] − k[o + 1])
+    mat = np.zeros((m + 2 * t, m))
+    for i in range(2 * t + 1):
+        mat[np.arange(m) + i, np.arange(m)] = kd[i]
+    return mat.astype(np.float32)
 
 
-def _template_gradients(coef: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32]:
-    """Exact spline derivatives ∂L/∂x, ∂L/∂y at the window pixels, each (n, M²), DN/px."""
-    m = 2 * r + 1
-    h, w = coef.shape
-    k = np.arange(-r - 1, r + 2)
-    rows = np.clip(y0[:, None] + k[None, :], 0, h - 1)
-    cols = np.clip(x0[:, None] + k[None, :], 0, w - 1)
-    blk = coef[rows[:, :, None], cols[:, None, :]]  # (n, M + 2, M + 2)
-    dx = 0.5 * (blk[:, :, 2:] - blk[:, :, :-2])
-    sm = (blk[:, :, :-2] + 4 * blk[:, :, 1:-1] + blk[:, :, 2:]) / 6
-    gx = (dx[:, :-2] + 4 * dx[:, 1:-1] + dx[:, 2:]) / 6
-    gy = 0.5 * (sm[:, 2:] - sm[:, :-2])
-    return gx.reshape(len(x0), m * m), gy.reshape(len(x0), m * m)
+def _image_gradients(img: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32, F32]:
+    """Windows and the exact spline derivatives ∂L/∂x, ∂L/∂y there, each (n, M²), DN, DN/px.
+
+    Filtered from the image (mirror border) by :func:`_derivative_fir`: the same values as
+    differentiating :func:`bspline_coefficients`, without prefiltering the whole image.
+    """
+    t, m, n = _TAPS + 1, 2 * r + 1, len(x0)
+    h, w = img.shape
+    u, v = np.arange(-r, r + 1), np.arange(-r - t, r + t + 1)
+
+    def mirror(i: I64, size: int) -> I64:
+        i = np.abs(i)
+        return np.where(i > size - 1, 2 * (size - 1) - i, i)
+
+    mat = _derivative_fir(r)
+    ys, xs = mirror(y0[:, None] + v, h), mirror(x0[:, None] + v, w)
+    px = img[(y0[:, None] + u)[:, :, None], xs[:, None, :]]  # (n, M, M + 2t)
+    py = img[ys[:, None, :], (x0[:, None] + u)[:, :, None]]  # (n, M cols, M + 2t rows)
+    gx = px.reshape(n * m, -1).astype(np.float32) @ mat
+    gy = py.reshape(n * m, -1).astype(np.float32) @ mat
+    gy = gy.reshape(n, m, m).transpose(0, 2, 1).reshape(n, m * m)
+    return np.ascontiguousarray(px[:, :, t : t + m].reshape(n, m * m)), gx.reshape(n, m * m), gy
 
 
-def _chain(theta: F64, npar: int) -> F64:
-    """C (k, p, 6): J = C · [∂L/∂x, ∂L/∂y, u·∂L/∂x, v·∂L/∂x, 1, R(warp)] (module docstring).
+def _chain(theta: F64, slant: bool) -> F64:
+    """C (k, p, q): J = C · basis, the basis [L_x, L_y, (u·L_x, v·L_x,) 1, R(warp)].
 
     At the solution a·∂R/∂x·(1 − s_x) = ∂L/∂x and a·∂R/∂y = ∂L/∂y + s_y·a·∂R/∂x, so
     J_d = −f·L_x, J_e = −L_y − s_y·f·L_x, J_a = R, J_b = 1, J_sx = −f·u·L_x, J_sy = −f·v·L_x
-    with f = 1 / (1 − s_x).
+    with f = 1 / (1 − s_x); without slant (p = q = 4) f = 1 and s_y = 0.
     """
     k = len(theta)
+    if not slant:
+        c = np.zeros((k, 4, 4))
+        c[:, 0, 0] = c[:, 1, 1] = -1.0
+        c[:, 2, 3] = c[:, 3, 2] = 1.0
+        return c
     f = 1.0 / (1.0 - theta[:, 4])
-    c = np.zeros((k, npar, 6))
+    c = np.zeros((k, N_PARAMS, 6))
     c[:, 0, 0] = -f
     c[:, 1, 0], c[:, 1, 1] = -theta[:, 5] * f, -1.0
     c[:, 2, 5] = 1.0
     c[:, 3, 4] = 1.0
-    if npar == N_PARAMS:
-        c[:, 4, 2], c[:, 5, 3] = -f, -f
+    c[:, 4, 2], c[:, 5, 3] = -f, -f
     return c
 
 
-def _projections(gx: F32, gy: F32, x: F32, uu: F32, vv: F32) -> F32:
-    """Σ over the window of [L_x, L_y, u·L_x, v·L_x, 1] · x, shape (k, 5)."""
-    gxx = gx * x
-    return np.stack([gxx.sum(1), (gy * x).sum(1), gxx @ uu, gxx @ vv, x.sum(1)], axis=1)
-
-
-def _basis_gram(gx: F64, gy: F64, w: F64, uu: F64, vv: F64) -> F64:
-    """Σ w·b_i·b_j over the window for the fixed basis [L_x, L_y, u·L_x, v·L_x, 1], (n, 5, 5)."""
-    mom = np.stack([np.ones_like(uu), uu, vv, uu * uu, uu * vv, vv * vv], axis=1) * w[:, None]
-    xx = (gx * gx) @ mom  # Σ w L_x² · [1, u, v, u², uv, v²]
-    xy = (gx * gy) @ mom[:, :3]
-    x1 = gx @ mom[:, :3]
-    g = np.empty((len(gx), 5, 5))
-    rows = [
-        (0, 0, xx[:, 0]), (0, 1, xy[:, 0]), (0, 2, xx[:, 1]), (0, 3, xx[:, 2]), (0, 4, x1[:, 0]),
-        (1, 1, (gy * gy) @ mom[:, 0]), (1, 2, xy[:, 1]), (1, 3, xy[:, 2]), (1, 4, gy @ mom[:, 0]),
-        (2, 2, xx[:, 3]), (2, 3, xx[:, 4]), (2, 4, x1[:, 1]),
-        (3, 3, xx[:, 5]), (3, 4, x1[:, 2]),
-        (4, 4, np.full(len(gx), mom[:, 0].sum())),
-    ]  # fmt: skip
-    for i, j, v in rows:
-        g[:, i, j] = g[:, j, i] = v
-    return g
-
-
-def _gram(basis_gram: F64, proj: NDArray[np.floating], self_term: NDArray[np.floating]) -> F64:
-    """The 6 × 6 Gram matrix of [fixed basis, R(warp)] from its blocks, shape (k, 6, 6)."""
-    k = len(proj)
-    g = np.empty((k, 6, 6))
-    g[:, :5, :5] = basis_gram
-    g[:, :5, 5] = g[:, 5, :5] = proj
-    g[:, 5, 5] = self_term
+def _gram(basis_gram: F64, proj: F64, self_term: F64) -> F64:
+    """The Gram matrix of [fixed basis, R(warp)] from its blocks, shape (k, q, q)."""
+    k, q = proj.shape[0], proj.shape[1] + 1
+    g = np.empty((k, q, q))
+    g[:, :-1, :-1] = basis_gram
+    g[:, :-1, -1] = g[:, -1, :-1] = proj
+    g[:, -1, -1] = self_term
     return g
 
 
 def refine_lk(
     left: F32,
-    left_coef: F32,
+    left_coef: F32 | None,
     right_coef: F32,
     xy: I64,
     d0: F64,
@@ -273,8 +270,10 @@ def refine_lk(
     ----------
     left : ndarray, shape (H, W), float32
         Left (wide) image, rectified.
-    left_coef, right_coef : ndarray, shape (H, W), float32
-        :func:`bspline_coefficients` of the left and right images, in the same pixel frame.
+    left_coef : None
+        Unused (kept for compatibility): the template gradients are filtered from ``left``.
+    right_coef : ndarray, shape (H, W), float32
+        :func:`bspline_coefficients` of the right image, in the same pixel frame as ``left``.
     xy : ndarray of int, shape (N, 2)
         Window centres (x, y) in the left image, integer pixels.
     d0, e0 : ndarray, shape (N,)
@@ -306,17 +305,20 @@ def refine_lk(
     if n and (x0.min() < r or y0.min() < r or x0.max() >= w - r or y0.max() >= h - r):
         raise InputError(f"windows of radius {r} must lie inside the left image {w}×{h}")
     npar = N_PARAMS if slant else 4
-    tmpl = _windows(left, x0, y0, r)
-    tgx, tgy = _template_gradients(left_coef, x0, y0, r)
+    tmpl, tgx, tgy = _image_gradients(np.asarray(left, np.float32), x0, y0, r)
     wts = gaussian_window(r, sigma_w).ravel()
     wn = wts / wts.sum()
     u = np.arange(-r, r + 1, dtype=np.float64)
     uu, vv = np.tile(u, 2 * r + 1), np.repeat(u, 2 * r + 1)
-    gx64, gy64 = tgx.astype(np.float64), tgy.astype(np.float64)
-    gram1 = _basis_gram(gx64, gy64, wts, uu, vv)  # Σ w b_i b_j
-    gram2 = _basis_gram(gx64, gy64, wts**2, uu, vv)  # Σ w² b_i b_j
-    # per-iteration products in float32 (sums of ≤ 4 k terms; the normal equations in float64)
-    w32, wn32, uu32, vv32 = (a.astype(np.float32) for a in (wts, wn, uu, vv))
+    # fixed basis [L_x, L_y, (u·L_x, v·L_x,) 1] and its weighted moments (float64, per window)
+    parts = [tgx, tgy, uu * tgx, vv * tgx] if slant else [tgx, tgy]
+    basis = np.stack([*np.broadcast_arrays(*parts), np.ones((n, len(uu)))], axis=1)
+    bw = basis * wts  # (n, q − 1, M²)
+    gram1 = np.einsum("kqp,krp->kqr", bw, basis)  # Σ w b_i b_j
+    gram2 = np.einsum("kqp,krp->kqr", bw * wts, basis)  # Σ w² b_i b_j
+    t64 = tmpl.astype(np.float64)
+    bt = np.einsum("kqp,kp->kq", bw, t64)  # Σ w b_i L
+    wn32 = wn.astype(np.float32)
     theta = np.zeros((n, N_PARAMS))
     theta[:, 0], theta[:, 1] = d0, e0
     start = theta[:, :2].copy()
@@ -336,16 +338,21 @@ def refine_lk(
             sr = np.sqrt(np.maximum(((val32 - mr[:, None]) ** 2) @ wn32, 0))
             th[:, 2] = st / np.maximum(sr, 1e-6)
             th[:, 3] = mt - th[:, 2] * mr
-        ab = th[:, 2:4].astype(np.float32)
-        res = t - ab[:, :1] * val32 - ab[:, 1:]
-        gx, gy = tgx[active], tgy[active]
-        wval, wres = val32 * w32, res * w32
-        chain = _chain(th, npar)
-        gram = _gram(gram1[active], _projections(gx, gy, wval, uu32, vv32), (wval * val32).sum(1))
+        v64 = val32.astype(np.float64)
+        a, b = th[:, 2].copy(), th[:, 3].copy()
+        g1 = gram1[active]
+        pv = np.einsum("kqp,kp->kq", bw[active], v64)  # Σ w b_i R
+        rr, rl = (v64 * v64) @ wts, (v64 * t64[active]) @ wts  # Σ w R², Σ w R L
+        # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
-            [_projections(gx, gy, wres, uu32, vv32), (wres * val32).sum(1)[:, None]], axis=1
+            [
+                bt[active] - a[:, None] * pv - b[:, None] * g1[:, :, -1],
+                (rl - a * rr - b * pv[:, -1])[:, None],
+            ],
+            axis=1,
         )
-        hess = chain @ gram @ chain.transpose(0, 2, 1)
+        chain = _chain(th, slant)
+        hess = chain @ _gram(g1, pv, rr) @ chain.transpose(0, 2, 1)
         step, spd = solve_spd(hess, (chain @ proj_res[:, :, None])[:, :, 0])
         good = inside & spd & np.isfinite(step).all(axis=1)
         step[~good] = 0.0
@@ -357,21 +364,22 @@ def refine_lk(
         fin = small & ~bad
         if fin.any():  # statistics from this (last) evaluation: the step was below tol
             i = np.flatnonzero(fin)
-            w2v = wval[i] * w32
+            ai = active[i]
             g2 = _gram(
-                gram2[active[i]],
-                _projections(gx[i], gy[i], w2v, uu32, vv32),
-                (w2v * val32[i]).sum(1),
+                gram2[ai],
+                np.einsum("kqp,kp->kq", bw[ai], v64[i] * wts),
+                (v64[i] ** 2) @ (wts**2),
             )
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())
-            cov[active[i]] = c_cov[:, :2, :2]
-            rvar[active[i]] = (res[i] * wres[i]).sum(1) / np.maximum(dof, 1.0)
+            cov[ai] = c_cov[:, :2, :2]
+            res = t64[ai] - a[i, None] * v64[i] - b[i, None]
+            rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
             tc = t[i] - (t[i] @ wn32)[:, None]
             vc = val32[i] - (val32[i] @ wn32)[:, None]
             den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
-            zncc[active[i]] = ((tc * vc) @ wn32) / np.maximum(den, 1e-12)
-            ok_out[active[i]] = True
+            zncc[ai] = ((tc * vc) @ wn32) / np.maximum(den, 1e-12)
+            ok_out[ai] = True
         active = active[~(fin | bad)]
     tc = tmpl - (tmpl @ wn)[:, None]
     return Refinement(
