@@ -1,0 +1,129 @@
+"""Blocks of the Phase 0 flows: majority, plane, coarse disparity, gates, corrector, focus fix."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from phonestereo.fixes.focus import ScaleOffset
+from phonestereo.flows import application
+from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.focus_stack import FocusCorrection
+from phonestereo.flows.gates import capture_gates, first_failed
+from phonestereo.flows.roi_disparity import coarse_disparity, fit_plane, majority, measure_roi
+from phonestereo.geometry import Camera, Rig, Transform
+from phonestereo.io import Calibration, CaptureEntry
+from phonestereo.learning.observation import Observation
+
+
+def _entry(**kw: object) -> CaptureEntry:
+    base = {
+        "id": "c0",
+        "wide": "w.png",
+        "tele": "t.png",
+        "time_s": 600.0,
+        "gravity": (0.0, 1.0, 0.0),
+        "kind": "verification",
+        "roi": (900, 650, 200, 150),
+    }
+    base.update(kw)
+    return CaptureEntry(**base)  # type: ignore[arg-type]
+
+
+def _rig() -> Rig:
+    wide = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)
+    return Rig(wide, wide.scaled(3.0), Transform.from_rotvec([0, 0, 0], [0.0, -0.012, 0.0]))
+
+
+def test_majority_picks_the_dominant_surface() -> None:
+    rng = np.random.default_rng(0)
+    d = np.concatenate([rng.normal(9.0, 0.05, 60), rng.normal(4.0, 0.05, 30)])
+    v, mask = majority(d, bin_px=0.5, tol_px=0.5, tol_rel=0.0)
+    # 60 matches on the near plane: its median, to its noise / √60 ≈ 0.01 px.
+    assert abs(v - 9.0) < 0.03 and mask.sum() == 60
+
+
+def test_plane_fit_recovers_a_slanted_plane_with_honest_sigma() -> None:
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 300, (200, 2))
+    d_true = 10.0 + 0.01 * (xy[:, 0] - 150) - 0.005 * (xy[:, 1] - 150)
+    d = d_true + rng.normal(0, 0.05, 200)
+    d[:10] += 3.0  # mismatches
+    p = fit_plane(xy, d, np.full(200, 0.05))
+    pred, sig = p.predict([[150.0, 150.0]])
+    # 0.05 px noise over 190 inliers: σ of the centre ≈ 0.05/√190 ≈ 0.004 px; 4σ.
+    assert abs(pred[0] - 10.0) < 4 * sig[0] + 1e-3
+    assert 0.002 < sig[0] < 0.01
+
+
+def test_coarse_disparity_finds_the_shift_of_a_texture() -> None:
+    rng = np.random.default_rng(2)
+    import cv2
+
+    left = cv2.GaussianBlur(rng.uniform(0, 255, (200, 300)).astype(np.float32), (0, 0), 2.0)
+    shift = 12.3
+    M = np.float32([[1, 0, -shift], [0, 1, 0]])
+    right = cv2.warpAffine(left, M, (300, 200), flags=cv2.INTER_CUBIC)
+    d, peak, second, e = coarse_disparity(left, right, (60, 40, 150, 120), 0, 40)
+    # Whole-window ZNCC + parabola: a coarse start, ±0.3 px is all the fine search needs.
+    assert abs(d - shift) < 0.3 and peak > 0.95 and second < peak and e == 0
+
+
+def test_gates_name_what_failed() -> None:
+    cold = first_failed(capture_gates(_entry(time_s=20.0), warmup_s=180.0))
+    assert cold is not None and cold.name == "heated" and "cold" in cold.reason
+    af = first_failed(capture_gates(_entry(focus_mode="auto"), warmup_s=180.0))
+    assert af is not None and af.name == "fixed-focus"
+    assert first_failed(capture_gates(_entry(), warmup_s=180.0)) is None
+
+
+def _obs(n: int = 40, offset: float = -2.5, gain: float = 0.01) -> list[Observation]:
+    rng = np.random.default_rng(3)
+    out = []
+    for i in range(n):
+        x, y, d = rng.uniform(200, 500), rng.uniform(200, 600), rng.uniform(6, 20)
+        c = offset + gain * d
+        out.append(Observation(x, y, d, d + c, 1.5, "landscape", "g", 300.0 + i, None,
+                               f"cap{i // 2}", "face-chart", 0.02))  # fmt: skip
+    return out
+
+
+def test_corrector_learns_offset_and_gain_and_keys_by_bucket() -> None:
+    corr = Corrector(_obs(), FlowConfig())
+    c = corr.correct([[350.0, 400.0, 4.5]], "landscape")
+    # Noise-free offset + gain: the extrapolation to d = 4.5 px is exact to 1e-3 px.
+    assert c.ok and abs(c.value_px[0] - (-2.5 + 0.045)) < 1e-3
+    assert not corr.correct([[350.0, 400.0, 4.5]], "landscape-flipped").ok
+    merged = Corrector(_obs(), FlowConfig(orientation_buckets=False))
+    assert merged.correct([[350.0, 400.0, 9.0]], "portrait-x+").ok
+
+
+def test_application_gates_and_failures_are_results() -> None:
+    cal = Calibration(_rig())
+    img = np.full((1500, 2000), 128, np.uint8)
+    cold = application.run(
+        FlowConfig(), application.ApplicationInputs(cal, _entry(time_s=5.0), img, img)
+    )
+    assert not cold.ok and cold.gate == "heated" and np.isnan(cold.depth_m)
+    empty = application.run(FlowConfig(), application.ApplicationInputs(cal, _entry(), img, img))
+    assert not empty.ok and empty.gate == "learned" and "learn" in empty.reason
+    cfg = FlowConfig(learned_correction=False)
+    flat = application.run(cfg, application.ApplicationInputs(cal, _entry(), img, img))
+    assert not flat.ok and flat.gate == "measure" and "texture" in flat.reason
+
+
+def test_roi_outside_the_image_is_an_input_error() -> None:
+    img = np.zeros((1500, 2000), np.uint8)
+    with pytest.raises(Exception, match="not inside"):
+        measure_roi(_rig(), img, img, (1950, 10, 100, 100))
+
+
+def test_focus_correction_scales_the_cameras() -> None:
+    rig = _rig()
+    c = np.array([rig.tele.cx, rig.tele.cy])
+    fc = FocusCorrection(ScaleOffset.identity([rig.wide.cx, rig.wide.cy]),
+                         ScaleOffset(1.001, np.array([5.0, 0.0]), c))  # fmt: skip
+    out = fc.apply(rig)
+    # This attempt's tele is 1/1.001 of the median; the hand's offset is not applied.
+    assert out.tele.fx == pytest.approx(rig.tele.fx / 1.001, rel=1e-12)
+    assert out.tele.cx == rig.tele.cx and out.wide.fx == rig.wide.fx
