@@ -71,7 +71,7 @@ def demo(
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(task, description=stage, completed=done, total=total)
 
-        res = run_bench(out, ablations=full, progress=progress)
+        res = run_bench(out, ablations=full, lookups=full, progress=progress)
     res["module"] = spec.name
     report = write_report(res, out / "report.html", title=f"phonestereo demo: {spec.name}")
     res["report"] = str(report)

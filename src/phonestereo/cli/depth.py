@@ -137,6 +137,16 @@ def print_bench(res: dict[str, Any], title: str) -> None:
             p90 = "–" if r["p90_rel_err"] is None else f"{100 * r['p90_rel_err']:.2f} %"
             ab.add_row(r["without"], med, p90, str(r["gated"]))
         Console().print(ab)
+    if res.get("lookups"):
+        lk = Table(title="learned-correction lookups (thesis Figure 3-31, plus the smooth field)")
+        for col in ("lookup", "median", "p90", "within σ"):
+            lk.add_column(col, justify="right")
+        for r in res["lookups"]:
+            med = "–" if r["median_rel_err"] is None else f"{100 * r['median_rel_err']:.2f} %"
+            p90 = "–" if r["p90_rel_err"] is None else f"{100 * r['p90_rel_err']:.2f} %"
+            ws = "–" if r["within_sigma"] is None else f"{100 * r['within_sigma']:.0f} %"
+            lk.add_row(r["lookup"], med, p90, ws)
+        Console().print(lk)
     within = res["stages"].get("within_sigma")
     if within is not None:
         Console().print(f"|Z − Z_true| ≤ σ for {100 * within:.0f} % of the verification captures")
@@ -159,6 +169,9 @@ def clean(v: Any) -> Any:
 def evaluate(
     capture_set: Annotated[Path, typer.Argument(help="Simulated set with ground_truth.json.")],
     ablations: Annotated[bool, typer.Option(help="Also switch each fix off in turn.")] = False,
+    lookups: Annotated[
+        bool, typer.Option(help="Also compare the lookup strategies of Figure 3-31.")
+    ] = False,
     report: Annotated[Path | None, typer.Option(help="Write an HTML report here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
 ) -> None:
@@ -176,7 +189,7 @@ def evaluate(
             def progress(stage: str, done: int, total: int) -> None:
                 bar.update(task, completed=done, total=total, description=stage)
 
-            res = run_bench(capture_set, ablations=ablations, progress=progress)
+            res = run_bench(capture_set, ablations=ablations, lookups=lookups, progress=progress)
     except (InputError, StoreError, PhysicsError) as exc:
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from exc

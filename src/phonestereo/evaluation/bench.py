@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +30,7 @@ from phonestereo.errors import InputError
 from phonestereo.evaluation.summary import score_capture_set
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.flows import application, learning
-from phonestereo.flows.config import FIXES, Corrector, FlowConfig
+from phonestereo.flows.config import FIXES, LOOKUPS, Corrector, FlowConfig
 from phonestereo.flows.learning import CachedBackend, stack_corrections
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store import FixStore
@@ -130,6 +131,7 @@ def run_bench(
     config: FlowConfig | None = None,
     *,
     ablations: bool = False,
+    lookups: bool = False,
     backend: LandmarkBackend | None = None,
     store_path: str | Path | None = None,
     progress: Progress | None = None,
@@ -143,6 +145,9 @@ def run_bench(
     config : FlowConfig
     ablations : bool
         Also re-run with each fix of :data:`~phonestereo.flows.config.FIXES` off.
+    lookups : bool
+        Also apply the same learned observations with every lookup strategy (Figure 3-31's
+        nearest, mean, max, min, centre beside the smooth field).
     backend : LandmarkBackend
         Default MediaPipe (cached across the ablation runs).
     store_path : path, optional
@@ -198,6 +203,16 @@ def run_bench(
             sc = _score(_rows(cs, res_off))
             table.append({"without": fix, **sc["full"], "gated": sc["gated"]})
         out["ablation"] = table
+    obs_all = [o for c in lr.captures for o in c.observations]
+    if lookups and obs_all:
+        rows_l = []
+        for name in LOOKUPS:
+            cfg_l = replace(cfg, lookup=name)
+            res_l = apply_all(cfg_l, cs, Corrector(obs_all, cfg_l))
+            sc = _score(_rows(cs, res_l))
+            rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],
+                           "gated": sc["gated"]})  # fmt: skip
+        out["lookups"] = rows_l
     out["seconds"] = round(time.perf_counter() - t0, 2)
     out["_observations"] = [o for c in lr.captures for o in c.observations]  # not JSON
     return out
