@@ -162,14 +162,19 @@ def test_cli_learn_json_and_bad_input(
     import phonestereo.learning.learn as learn_mod
     from phonestereo.cli.app import app
 
+    import phonestereo.flows.learning as flow_mod
+
     monkeypatch.setattr(learn_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
+    monkeypatch.setattr(flow_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
     args = ["learn", str(capture_set), "--calibration", str(capture_set / "calibration.json")]
     store = str(tmp_path / "cli_fast.sqlite")
     out = CliRunner().invoke(app, [*args, "--store", store, "--json"])
     assert out.exit_code == 0, out.output
     summary = json.loads(out.stdout[out.stdout.index("{") :])
     assert summary["n_learned"] == 2 and summary["skipped"] == []
-    assert summary["captures"][0]["faces"][0]["n_windows"] > 0
+    # the learning flow: every face observation W-T scaled (stage recorded per capture)
+    assert summary["captures"][0]["n_observations"] > 0
+    assert summary["captures"][0]["stages"]["wt_scale"]["ok"]
     out = CliRunner().invoke(app, [*args, "--store", store])  # the Rich table
     assert out.exit_code == 0 and "observation(s) from 2/2 face capture(s)" in out.stdout
     bad = CliRunner().invoke(app, [*args, "--store", store, "--ipd-mm", "6.3"])
