@@ -160,7 +160,9 @@ def learn_face_capture(
         why = "the faces are not inside the tele's view"
         if box is not None:
             imgs = [read_gray(p) for p in cs.image_paths(entry.id)]
-            m = measure_roi(rig, imgs[0], imgs[1], box, replace(config.roi, expand=1.0), rect)
+            m = measure_roi(
+                rig, imgs[0], imgs[1], box, replace(config.roi, expand=1.0, coarse_expand=1.0), rect
+            )
             wt = m.wt
             why = m.reason or (wt.reason if wt is not None else "")
         stages["wt_scale"] = None if wt is None else wt.to_dict()

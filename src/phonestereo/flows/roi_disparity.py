@@ -52,8 +52,11 @@ class RoiConfig:
     min_matches : int
         Fewest matches on the surface for a measurement.
     coarse_min_zncc, fine_range_px : float, int
-        The coarse whole-ROI correlation must reach this ZNCC; the fine search is then
+        The coarse whole-box correlation must reach this ZNCC; the fine search is then
         ±``fine_range_px`` around it (repetitive texture stays unambiguous).
+    coarse_expand, max_ambiguity : float
+        The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
+        away) above ``max_ambiguity`` × the first makes the measurement fail as ambiguous.
     wt_scale : bool
         Fit and apply the W-T scale in the ROI (§3.5.1).
     match : MatchConfig
@@ -69,6 +72,8 @@ class RoiConfig:
     coarse_min_zncc: float = 0.5
     equalise_blur: bool = True
     coarse_rows: int = 8
+    coarse_expand: float = 3.0
+    max_ambiguity: float = 0.97
     fine_range_px: int = 3
     wt_scale: bool = True
     # Wide and tele have different optics: a window never fits to the noise level (the
@@ -345,25 +350,37 @@ def measure_roi(
     grid_raw = roi_grid(roi)
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
     big = _expanded(roi, cfg.expand, rig.wide.size)
-    win = Rectification.from_rig(rig, cfg.mode, RectifyOptions(roi=big, margin_px=d_max + 12))
+    wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
+    win = Rectification.from_rig(rig, cfg.mode, RectifyOptions(roi=wide_box, margin_px=d_max + 12))
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
     lw, rt = win.remap(image_wide, image_tele)
     box_small = win.points_wide(roi_grid(roi, 3))
-    box_big = win.points_wide(roi_grid(big, 3))
-    if not (np.isfinite(box_small).all() and np.isfinite(box_big).all()):
-        return _fail("the ROI does not map into the rectified view", grid, counts)
-    lo, hi = np.floor(box_big.min(0)).astype(int), np.ceil(box_big.max(0)).astype(int)
-    rw, rh = win.wide_rect.size
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-    box = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
-    d0, peak, _second, e0 = coarse_disparity(lw, rt, box, -2, d_max, rows=cfg.coarse_rows)
+    boxes = []
+    for b in (big, wide_box):
+        pts = win.points_wide(roi_grid(b, 3))
+        if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
+            return _fail("the ROI does not map into the rectified view", grid, counts)
+        lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+        rw, rh = win.wide_rect.size
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
+        boxes.append((int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)))
+    box, cbox = boxes
+    # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
+    # (a chessboard's period is inside the disparity range) needs the context around it.
+    d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
     if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
         return _fail(
             f"the ROI does not correlate with the tele (ZNCC {peak:.2f} < "
             f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view",
+            grid, counts,
+        )  # fmt: skip
+    if second >= cfg.max_ambiguity * peak:
+        return _fail(
+            f"ambiguous disparity: two correlation peaks ({peak:.3f}, {second:.3f}) — a "
+            "repetitive texture without context; enlarge the ROI or aim at a distinct object",
             grid, counts,
         )  # fmt: skip
     if cfg.equalise_blur:
