@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -14,6 +13,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError, PhysicsError, StoreError
+from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
 from phonestereo.features.match_input import parse_roi
 from phonestereo.flows import application
@@ -150,19 +150,6 @@ def print_bench(res: dict[str, Any], title: str) -> None:
     within = res["stages"].get("within_sigma")
     if within is not None:
         Console().print(f"|Z − Z_true| ≤ σ for {100 * within:.0f} % of the verification captures")
-
-
-def clean(v: Any) -> Any:
-    """JSON-ready copy of a bench result (private keys dropped, NaN → null)."""
-    if isinstance(v, dict):
-        return {k: clean(x) for k, x in v.items() if not str(k).startswith("_")}
-    if isinstance(v, list | tuple):
-        return [clean(x) for x in v]
-    if isinstance(v, float | np.floating):
-        return None if not np.isfinite(v) else float(v)
-    if isinstance(v, np.integer | np.bool_):
-        return v.item()
-    return v
 
 
 @app.command("evaluate")

@@ -31,12 +31,13 @@ from typing import Any
 
 import cv2
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
+from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
     corner_keys,
@@ -206,10 +207,6 @@ def _truth(
 
 
 # --- figures -----------------------------------------------------------------------------------
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=100)
-    return path
 
 
 def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) -> list[Path]:
@@ -308,16 +305,3 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     return AnalysisOutput(
         "distortion", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files)
     )
-
-
-def _clean(v: Any) -> Any:
-    """JSON-safe copy: NaN/inf → None, NumPy scalars → Python numbers."""
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v

@@ -30,8 +30,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.analyses.essential import MIN_ATTEMPTS, measure_stacks
-from phonestereo.evaluation.analyses.heating import _clean, _save
 from phonestereo.fixes.essential_compare import MIN_POINTS, shared_points
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.geometry import Rig

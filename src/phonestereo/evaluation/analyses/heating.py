@@ -26,11 +26,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
     corner_keys,
@@ -209,10 +210,6 @@ def analyze_heating(
 
 
 # --- figures -----------------------------------------------------------------------------------
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=110)
-    return path
 
 
 def _fit_panel(
@@ -339,16 +336,3 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
     files.append(path)
     return AnalysisOutput("heating", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files))
-
-
-def _clean(v: Any) -> Any:
-    """JSON-safe copy: NaN/inf → None, NumPy scalars → Python numbers."""
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
