@@ -129,8 +129,8 @@ def print_bench(res: dict[str, Any], title: str) -> None:
     table.add_row("all", *(cell(res["stages"][k]) for k, _ in stages))
     Console().print(table)
     if res.get("ablation"):
-        ab = Table(title="ablation: each fix off in turn")
-        for col in ("without", "median", "p90", "gated"):
+        ab = Table(title="ablation: each fix switched the other way in turn")
+        for col in ("change", "median", "p90", "gated"):
             ab.add_column(col, justify="right")
         for r in res["ablation"]:
             med = "–" if r["median_rel_err"] is None else f"{100 * r['median_rel_err']:.2f} %"

@@ -199,9 +199,11 @@ def run_bench(
         for i, fix in enumerate(FIXES):
             if progress is not None:
                 progress("ablation", i, len(FIXES))
-            _, res_off = learn_and_apply(cfg.without(fix), cs, det)
+            _, res_off = learn_and_apply(cfg.toggled(fix), cs, det)
             sc = _score(_rows(cs, res_off))
-            table.append({"without": fix, **sc["full"], "gated": sc["gated"]})
+            label = f"without {fix}" if getattr(cfg, fix) else f"with {fix}"
+            table.append({"without": label, **sc["full"], "gated": sc["gated"],
+                          "within_sigma": sc["within_sigma"]})  # fmt: skip
         out["ablation"] = table
     obs_all = [o for c in lr.captures for o in c.observations]
     if lookups and obs_all:

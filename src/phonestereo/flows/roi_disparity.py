@@ -56,7 +56,8 @@ class RoiConfig:
         ±``fine_range_px`` around it (repetitive texture stays unambiguous).
     coarse_expand, max_ambiguity : float
         The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
-        away) above ``max_ambiguity`` × the first makes the measurement fail as ambiguous.
+        away, a separate local maximum) above ``max_ambiguity`` × the first makes the
+        measurement fail as ambiguous.
     wt_scale : bool
         Fit and apply the W-T scale in the ROI (§3.5.1).
     match : MatchConfig
@@ -192,12 +193,12 @@ def coarse_disparity(
     left: Any, right: Any, box: tuple[int, int, int, int], d_min: int, d_max: int, rows: int = 3
 ) -> tuple[float, float, float, float]:
     """Whole-window ZNCC disparity of a rectified box (cv2.matchTemplate): (d, peak ZNCC,
-    second peak, e) with e the whole-pixel row offset.
+    second peak (another local maximum > 2 px away), e) with e the whole-pixel row offset.
 
     The coarse step before sub-pixel matching: one large window (the expanded ROI) is far less
     ambiguous than 15-px windows on repetitive texture (a chessboard's period is within the
     disparity range), so the fine search can then be narrowed to a few pixels around it. The
-    second peak is the best score more than 2 px away (an ambiguity measure).
+    second peak is the best other local maximum more than 2 px away (an ambiguity measure).
     """
     x, y, w, h = box
     tpl = np.ascontiguousarray(left[y : y + h, x : x + w], dtype=np.float32)
@@ -216,8 +217,12 @@ def coarse_disparity(
     if 0 < j < len(col) - 1:  # parabola through the peak: coarse only, ±0.5 px is enough
         den = col[j - 1] - 2 * col[j] + col[j + 1]
         sub = float(0.5 * (col[j - 1] - col[j + 1]) / den) if den < 0 else 0.0
-    far = np.abs(np.arange(len(col)) - j) > 2
-    second = float(col[far].max()) if far.any() else float("nan")
+    # The second peak is the best *other local maximum* (a broad main lobe is not ambiguity).
+    inner = col[1:-1]
+    is_max = (inner >= col[:-2]) & (inner >= col[2:])
+    idx = np.flatnonzero(is_max) + 1
+    idx = idx[np.abs(idx - j) > 2]
+    second = float(col[idx].max()) if idx.size else float("-inf")
     d = x - (xs0 + j + sub)
     return float(d), peak, second, float(y - row)
 

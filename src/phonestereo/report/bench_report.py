@@ -140,7 +140,7 @@ def _ablation(bench: dict[str, Any]) -> str:
     )
     full = bench["stages"]["full"]
     return (
-        "<h2>Ablation: each fix switched off in turn</h2><table><tr><th>without</th>"
+        "<h2>Ablation: each fix switched the other way in turn</h2><table><tr><th>change</th>"
         "<th>median</th><th>p90</th><th>gated</th></tr>"
         f"<tr><td><i>(all fixes on)</i></td><td>{_pct(full['median_rel_err'])}</td>"
         f"<td>{_pct(full['p90_rel_err'])}</td><td>{bench['stages']['gated']}</td></tr>"
