@@ -19,6 +19,7 @@ from phonestereo.features.match_input import parse_roi
 from phonestereo.flows import application
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.learning import stack_corrections
+from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store import FixStore
 
@@ -74,13 +75,14 @@ def depth(
         if roi is not None:
             box = parse_roi(roi, cal.rig.wide.size)
         focus = stack_corrections(cfg, cs, entries, cal)
+        ref = reference_rectification(cal.rig, cfg.mode)
         results = []
         with _bar("depth", console, as_json) as bar:
             task = bar.add_task("depth", total=len(entries))
             for e in entries:
                 w, t = (read_gray(p) for p in cs.image_paths(e.id))
                 inputs = application.ApplicationInputs(
-                    cal, e, w, t, corrector, box, focus.get(e.id)
+                    cal, e, w, t, corrector, box, focus.get(e.id), ref
                 )
                 results.append(application.run(cfg, inputs))
                 bar.advance(task)

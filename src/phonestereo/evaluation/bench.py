@@ -32,6 +32,7 @@ from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.flows import application, learning
 from phonestereo.flows.config import FIXES, LOOKUPS, Corrector, FlowConfig
 from phonestereo.flows.learning import CachedBackend, stack_corrections
+from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store import FixStore
 from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, load_ground_truth
@@ -59,10 +60,13 @@ def apply_all(
     cal = load_calibration(cs.calibration_path())
     ver = [c for c in cs.captures() if c.kind == "verification"]
     focus = stack_corrections(config, cs, ver, cal)
+    ref = reference_rectification(cal.rig, config.mode)
     out = []
     for i, c in enumerate(ver):
         w, t = (read_gray(p) for p in cs.image_paths(c.id))
-        inputs = application.ApplicationInputs(cal, c, w, t, corrector, focus=focus.get(c.id))
+        inputs = application.ApplicationInputs(
+            cal, c, w, t, corrector, focus=focus.get(c.id), reference=ref
+        )
         out.append(application.run(config, inputs))
         if progress is not None:
             progress(i + 1, len(ver))

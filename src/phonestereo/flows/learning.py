@@ -134,6 +134,7 @@ def learn_face_capture(
     *,
     focus: FocusCorrection | None = None,
     ipd_m: float = 0.063,
+    reference: Rectification | None = None,
 ) -> CaptureLearning:
     """The learning blocks of one face capture (module docstring)."""
     t0 = time.perf_counter()
@@ -146,7 +147,9 @@ def learn_face_capture(
     if config.focus_calibration and focus is not None:
         rig = focus.apply(rig)
         stages["focus_fix"] = focus.to_dict()
-    ref = reference_rectification(calibration.rig, config.mode)
+    ref = reference
+    if ref is None or ref.mode != config.mode:
+        ref = reference_rectification(calibration.rig, config.mode)
     rect = ref if rig is calibration.rig else reference_rectification(rig, config.mode)
     res = learn_capture(cs, entry.id, rect, ipd_m=ipd_m, backend=backend)
     stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s}
@@ -232,10 +235,18 @@ def run(
         )
     det = backend if backend is not None else MediaPipeBackend()
     corr = stack_corrections(config, cs, faces, calibration)
+    ref = reference_rectification(calibration.rig, config.mode)
     out, n_obs = [], 0
     for k, entry in enumerate(faces):
         r = learn_face_capture(
-            config, cs, entry, calibration, det, focus=corr.get(entry.id), ipd_m=ipd_mm / 1000
+            config,
+            cs,
+            entry,
+            calibration,
+            det,
+            focus=corr.get(entry.id),
+            ipd_m=ipd_mm / 1000,
+            reference=ref,
         )
         out.append(r)
         if r.ok and store is not None:
