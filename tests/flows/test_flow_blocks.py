@@ -7,10 +7,11 @@ import pytest
 
 from phonestereo.fixes.focus import ScaleOffset
 from phonestereo.flows import application
+from phonestereo.flows.coarse import coarse_disparity
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import capture_gates, first_failed
-from phonestereo.flows.roi_disparity import coarse_disparity, fit_plane, majority, measure_roi
+from phonestereo.flows.roi_disparity import fit_plane, majority, measure_roi
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.io import Calibration, CaptureEntry
 from phonestereo.learning.observation import Observation

@@ -16,13 +16,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
 from phonestereo.features.matching import MatchConfig, match_rectified
 from phonestereo.fixes.focus import WTScale, fit_wt_scale
+from phonestereo.flows.coarse import coarse_disparity, equalise_blur
 from phonestereo.geometry import Rig
 from phonestereo.geometry._checks import Array
 from phonestereo.rectification import Rectification, RectifyOptions
@@ -51,6 +51,8 @@ class RoiConfig:
         Histogram bin of the majority vote and the band kept about it (max of px, relative).
     min_matches : int
         Fewest matches on the surface for a measurement.
+    enough_matches : int
+        With fewer on the surface after blur equalisation, the unblurred pair is tried too.
     coarse_min_zncc, fine_range_px : float, int
         The coarse whole-box correlation must reach this ZNCC; the fine search is then
         ±``fine_range_px`` around it (repetitive texture stays unambiguous).
@@ -70,6 +72,7 @@ class RoiConfig:
     majority_tol_px: float = 0.75
     majority_tol_rel: float = 0.04
     min_matches: int = 12
+    enough_matches: int = 60
     coarse_min_zncc: float = 0.5
     equalise_blur: bool = True
     coarse_rows: int = 8
@@ -189,100 +192,6 @@ def fit_plane(xy: F64, d: F64, sigma: F64) -> PlaneFit:
     return PlaneFit(np.asarray(res.x), cov, x0, y0, scatter, int(inl.sum()))
 
 
-def coarse_disparity(
-    left: Any, right: Any, box: tuple[int, int, int, int], d_min: int, d_max: int, rows: int = 3
-) -> tuple[float, float, float, float]:
-    """Whole-window ZNCC disparity of a rectified box (cv2.matchTemplate): (d, peak ZNCC,
-    second peak (another local maximum > 2 px away), e) with e the whole-pixel row offset.
-
-    The coarse step before sub-pixel matching: one large window (the expanded ROI) is far less
-    ambiguous than 15-px windows on repetitive texture (a chessboard's period is within the
-    disparity range), so the fine search can then be narrowed to a few pixels around it. The
-    second peak is the best other local maximum more than 2 px away (an ambiguity measure).
-    """
-    x, y, w, h = box
-    tpl = np.ascontiguousarray(left[y : y + h, x : x + w], dtype=np.float32)
-    H, W = right.shape[:2]
-    xs0, xs1 = max(0, x - d_max), min(W, x + w - d_min)
-    ys0, ys1 = max(0, y - rows), min(H, y + h + rows)
-    strip = np.ascontiguousarray(right[ys0:ys1, xs0:xs1], dtype=np.float32)
-    if strip.shape[0] < h or strip.shape[1] < w or float(tpl.std()) < 1e-3:
-        return float("nan"), float("nan"), float("nan"), float("nan")
-    score = cv2.matchTemplate(strip, tpl, cv2.TM_CCOEFF_NORMED)
-    col = score.max(axis=0)  # best row per shift
-    j = int(np.argmax(col))
-    row = int(np.argmax(score[:, j])) + ys0  # the tele row of the box's top at the peak
-    peak = float(col[j])
-    sub = 0.0
-    if 0 < j < len(col) - 1:  # parabola through the peak: coarse only, ±0.5 px is enough
-        den = col[j - 1] - 2 * col[j] + col[j + 1]
-        sub = float(0.5 * (col[j - 1] - col[j + 1]) / den) if den < 0 else 0.0
-    # The second peak is the best *other local maximum* (a broad main lobe is not ambiguity).
-    inner = col[1:-1]
-    is_max = (inner >= col[:-2]) & (inner >= col[2:])
-    idx = np.flatnonzero(is_max) + 1
-    idx = idx[np.abs(idx - j) > 2]
-    second = float(col[idx].max()) if idx.size else float("-inf")
-    d = x - (xs0 + j + sub)
-    return float(d), peak, second, float(y - row)
-
-
-def equalise_blur(
-    left: Any,
-    right: Any,
-    box: tuple[int, int, int, int],
-    d0: float,
-    sigmas: tuple[float, ...] = (0.0, 0.4, 0.7, 1.0, 1.4, 1.8, 2.4, 3.0),
-) -> tuple[Any, Any, float, float]:
-    """Blur the sharper image of the pair so both have the same blur: (left, right, σ_l, σ_r).
-
-    Defocus differs between the cameras away from the focus distance (f/1.8 wide vs f/2.8
-    tele), and a blur mismatch makes every window misfit. The Gaussian σ (added to one image)
-    that maximises the box's ZNCC at the coarse disparity ``d0`` is chosen; a symmetric blur
-    does not move the correlation peak, so d is unbiased.
-    """
-    x, y, w, h = box
-    xi = round(d0)
-    _H, W = right.shape[:2]
-    x0 = max(x, xi)
-    x1 = min(x + w, W + xi)
-    if x1 - x0 < 16:
-        return left, right, 0.0, 0.0
-    a = np.asarray(left, np.float32)
-    b = np.asarray(right, np.float32)
-
-    def zncc(p: Any, q: Any) -> float:
-        p, q = p - p.mean(), q - q.mean()
-        return float((p * q).sum() / np.sqrt((p * p).sum() * (q * q).sum() + 1e-12))
-
-    # Candidates are scored on the compared regions plus a blur border only (not the window).
-    m = int(np.ceil(3 * max(sigmas))) + 1
-    ya, yb = max(y - m, 0), min(y + h + m, a.shape[0])
-    ca = a[ya:yb, max(x0 - m, 0) : min(x1 + m, a.shape[1])]
-    cb = b[ya:yb, max(x0 - xi - m, 0) : min(x1 - xi + m, b.shape[1])]
-    ia = (slice(y - ya, y - ya + h), slice(x0 - max(x0 - m, 0), x1 - max(x0 - m, 0)))
-    ib = (
-        slice(y - ya, y - ya + h),
-        slice(x0 - xi - max(x0 - xi - m, 0), x1 - xi - max(x0 - xi - m, 0)),
-    )
-    best = (zncc(ca[ia], cb[ib]), 0.0, 0.0)
-    for s in sigmas[1:]:
-        la = cv2.GaussianBlur(ca, (0, 0), s)
-        rb = cv2.GaussianBlur(cb, (0, 0), s)
-        best = max(best, (zncc(la[ia], cb[ib]), s, 0.0), (zncc(ca[ia], rb[ib]), 0.0, s))
-    if best[2] > 0:
-        # The tele is the sharper one: leave the pair as it is. (Blurring the matcher's right
-        # image collapses its sub-pixel stage — measured: 841 → 104 survivors on a chart at
-        # 2 m — while the wide/tele misfit of an unblurred pair only widens σ_d.)
-        best = (best[0], 0.0, 0.0)
-    _, s_l, s_r = best
-    if s_l > 0:
-        a = cv2.GaussianBlur(a, (0, 0), s_l)
-    if s_r > 0:
-        b = cv2.GaussianBlur(b, (0, 0), s_r)
-    return a, b, s_l, s_r
-
-
 def _expanded(roi: tuple[int, int, int, int], factor: float, size: tuple[int, int]) -> Any:
     x, y, w, h = roi
     cx, cy = x + w / 2, y + h / 2
@@ -321,6 +230,42 @@ def _fail(reason: str, grid: F64, counts: dict[str, int], wt: WTScale | None = N
         False, reason, np.zeros((0, 2)), z, z, z, np.zeros(0, bool), float("nan"), None, wt,
         grid, counts,
     )  # fmt: skip
+
+
+def _match_majority(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    d0: float,
+    e0: float,
+    slo: F64,
+    shi: F64,
+    cfg: RoiConfig,
+) -> tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]]:
+    """Fine matching around the coarse disparity, then majority → expansion → majority."""
+    counts: dict[str, int] = {}
+    mcfg = cfg.match
+    if abs(e0) + 2 > mcfg.row_tolerance:  # a calibration off across the baseline (refocus)
+        mcfg = replace(mcfg, row_tolerance=int(abs(e0)) + 2)
+    lo_d = int(np.floor(d0)) - cfg.fine_range_px
+    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
+    res = match_rectified(left, right, max_disparity=hi_d, min_disparity=lo_d, roi=box,
+                          config=mcfg)  # fmt: skip
+    counts["matches"] = len(res.d)
+    in_roi = np.all((res.xy >= slo) & (res.xy <= shi), axis=1)
+    counts["in_roi"] = int(in_roi.sum())
+    empty = np.zeros(0, np.int64)
+    if counts["in_roi"] < 3:
+        return res, in_roi, empty, float("nan"), counts
+    kw = {"bin_px": cfg.majority_bin_px, "tol_px": cfg.majority_tol_px,
+          "tol_rel": cfg.majority_tol_rel}  # fmt: skip
+    m1, _ = majority(res.d[in_roi], **kw)
+    tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
+    keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
+    m2, sel = majority(res.d[keep], **kw)
+    idx = np.flatnonzero(keep)[sel]
+    counts["majority"] = len(idx)
+    return res, in_roi, idx, m2, counts
 
 
 def measure_roi(
@@ -396,34 +341,32 @@ def measure_roi(
             "repetitive texture without context; enlarge the ROI or aim at a distinct object",
             grid, counts,
         )  # fmt: skip
-    if cfg.equalise_blur:
-        lw, rt, s_l, s_r = equalise_blur(lw, rt, box, d0)
-        counts["blur_added_x100"] = round(100 * (s_l - s_r))
-    lo_d = int(np.floor(d0)) - cfg.fine_range_px
-    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
     counts["coarse_e_px"] = int(e0)
-    mcfg = cfg.match
-    if abs(e0) + 2 > mcfg.row_tolerance:  # a calibration off across the baseline (refocus)
-        mcfg = replace(mcfg, row_tolerance=int(abs(e0)) + 2)
-    res = match_rectified(lw, rt, max_disparity=hi_d, min_disparity=lo_d, roi=box, config=mcfg)
-    counts["matches"] = len(res.d)
-    if len(res.d) == 0:
-        return _fail(f"no features matched in the ROI: {res.reason}", grid, counts)
     slo, shi = box_small.min(0), box_small.max(0)
-    in_roi = np.all((res.xy >= slo) & (res.xy <= shi), axis=1)
-    counts["in_roi"] = int(in_roi.sum())
+    variants = [(lw, rt, 0.0)]
+    if cfg.equalise_blur:
+        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0)
+        if s_l > 0 or s_r > 0:
+            variants.insert(0, (bl, br, s_l - s_r))
+    found: tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]] | None = None
+    for a, b, blur in variants:
+        # Blur equalisation first; the unblurred pair when it leaves few matches (it can
+        # help or hurt the window fits; the one with more matches on the surface is kept).
+        res, in_roi, idx, m2, sub = _match_majority(a, b, box, d0, e0, slo, shi, cfg)
+        sub["blur_added_x100"] = round(100 * blur)
+        if found is None or len(idx) > len(found[2]):
+            found = (res, in_roi, idx, m2, sub)
+        if len(idx) >= cfg.enough_matches:
+            break
+    assert found is not None
+    res, in_roi, idx, m2, sub = found
+    counts.update(sub)
+    if counts.get("matches", 0) == 0:
+        return _fail(f"no features matched in the ROI: {res.reason}", grid, counts)
     if counts["in_roi"] < 3:
         return _fail(
             f"only {counts['in_roi']} features matched inside the ROI: no texture?", grid, counts
         )
-    kw = {"bin_px": cfg.majority_bin_px, "tol_px": cfg.majority_tol_px,
-          "tol_rel": cfg.majority_tol_rel}  # fmt: skip
-    m1, _ = majority(res.d[in_roi], **kw)
-    tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
-    keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
-    m2, sel = majority(res.d[keep], **kw)
-    idx = np.flatnonzero(keep)[sel]
-    counts["majority"] = len(idx)
     if len(idx) < cfg.min_matches:
         return _fail(
             f"{len(idx)} matches on the majority surface (< {cfg.min_matches})", grid, counts
