@@ -146,9 +146,8 @@ def test_heating_drift_raises_the_bench_error(spec) -> None:
     assert hi["median_rel_err"] > lo["median_rel_err"] + 0.03  # measured +9 pp for 2 px
 
 
-def test_flow_bench_is_not_available_yet() -> None:
-    with pytest.raises(InputError, match="not available yet"):
-        get_bench("flow")
+def test_benches_by_name() -> None:
+    assert callable(get_bench("flow")) and callable(get_bench("analytic"))
     with pytest.raises(InputError, match="analytic"):
         get_bench("nope")
 
@@ -227,8 +226,8 @@ def test_cli_study_rejects_bad_input_before_work(tmp_path: Path) -> None:
     args = ["study", "--module", "folded-x3", "--samples", "4", "--out", str(tmp_path / "o")]
     r = runner.invoke(app, [*args, "--tolerances", str(bad)])
     assert r.exit_code == 2 and "tele.nope" in r.output
-    r = runner.invoke(app, [*args, "--tolerances", str(SHIPPED), "--bench", "flow"])
-    assert r.exit_code == 2 and "not available yet" in r.output
+    r = runner.invoke(app, [*args, "--tolerances", str(SHIPPED), "--bench", "nope"])
+    assert r.exit_code == 2 and "analytic" in r.output
     r = runner.invoke(
         app, [*args, "--tolerances", str(SHIPPED), "--scheduler", "127.0.0.1:notaport"]
     )

@@ -146,7 +146,11 @@ def study(
         str, typer.Option("--bench", help="Per-sample bench: analytic | flow (not yet).")
     ] = "analytic",
     quick: Annotated[
-        bool, typer.Option("--quick", help="Smaller bench: 3 distances, a 5x4 point grid.")
+        bool,
+        typer.Option(
+            "--quick",
+            help="Smaller bench (analytic: 3 distances, a 5x4 point grid; flow: 5 captures).",
+        ),
     ] = False,
     metric: Annotated[
         str, typer.Option("--metric", help="Ranked metric: median_rel_err | p90_rel_err.")
@@ -178,7 +182,7 @@ def study(
             samples,
             seed,
             bench,
-            AnalyticBenchConfig.quick() if quick and bench == "analytic" else None,
+            _quick_config(bench) if quick else None,
             metric,
             common_phone=not independent_phones,
         )
@@ -215,3 +219,12 @@ def study(
         f"mean {metric} {100 * result.metric_mean:.1f} %, R² {result.r_squared:.2f}, "
         f"{result.n_failed} failed sample(s), {result.n_run} run now; files in {out}"
     )
+
+
+def _quick_config(bench: str) -> Any:
+    """The smaller bench of ``--quick``."""
+    if bench == "flow":
+        from phonestereo.evaluation.flow_bench import FlowBenchConfig
+
+        return FlowBenchConfig.quick()
+    return AnalyticBenchConfig.quick()
