@@ -159,10 +159,9 @@ def test_cli_learn_json_and_bad_input(
     capture_set: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     import phonestereo.cli.learn  # noqa: F401  (registers the command)
+    import phonestereo.flows.learning as flow_mod
     import phonestereo.learning.learn as learn_mod
     from phonestereo.cli.app import app
-
-    import phonestereo.flows.learning as flow_mod
 
     monkeypatch.setattr(learn_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
     monkeypatch.setattr(flow_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
