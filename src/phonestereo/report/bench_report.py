@@ -24,7 +24,7 @@ from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 
 STAGES = (("naive", "naive Z = f·B/d"), ("measured", "fixes, no learned correction"),
-          ("full", "full flow"), ("cramer_rao_floor", "Cramér–Rao floor"))  # fmt: skip
+          ("full", "full flow"), ("cramer_rao_floor", "matching σ (Cramér–Rao)"))  # fmt: skip
 
 
 def _png(fig: Figure) -> str:
