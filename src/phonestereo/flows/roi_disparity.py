@@ -53,6 +53,8 @@ class RoiConfig:
         Fewest matches on the surface for a measurement.
     enough_matches : int
         With fewer on the surface after blur equalisation, the unblurred pair is tried too.
+    map_step_px : int
+        Grid step of the window's rectification maps (exact on the grid, splines between).
     coarse_min_zncc, fine_range_px : float, int
         The coarse whole-box correlation must reach this ZNCC; the fine search is then
         ±``fine_range_px`` around it (repetitive texture stays unambiguous).
@@ -73,6 +75,7 @@ class RoiConfig:
     majority_tol_rel: float = 0.04
     min_matches: int = 12
     enough_matches: int = 60
+    map_step_px: int = 16
     coarse_min_zncc: float = 0.5
     equalise_blur: bool = True
     coarse_rows: int = 8
@@ -83,9 +86,17 @@ class RoiConfig:
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast
     # chart), so only the contrast-relative residual test is kept; σ_d still includes misfit.
+    # After the coarse step the search is ±3 px: no slant fit and no left-right check are
+    # needed, and 450 keypoints are plenty for the disparity plane. Measured on four benches
+    # against 1200 keypoints with both: median 0.37-0.74 % → 0.37-0.58 %, p90 1.10-2.10 % →
+    # 0.89-1.52 %, ~130 ms → ~53 ms per capture.
     match: MatchConfig = field(
         default_factory=lambda: MatchConfig(
-            max_keypoints=1200, max_residual_ratio=1e9, max_normalized_residual=0.35
+            max_keypoints=450,
+            max_residual_ratio=1e9,
+            max_normalized_residual=0.35,
+            slant=False,
+            lr_check=False,
         )
     )
 
@@ -309,7 +320,8 @@ def measure_roi(
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
     big = _expanded(roi, cfg.expand, rig.wide.size)
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
-    win = Rectification.from_rig(rig, cfg.mode, RectifyOptions(roi=wide_box, margin_px=d_max + 12))
+    opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
+    win = Rectification.from_rig(rig, cfg.mode, opts)
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
