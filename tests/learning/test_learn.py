@@ -164,7 +164,7 @@ def test_cli_learn_json_and_bad_input(
     from phonestereo.cli.app import app
 
     monkeypatch.setattr(learn_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
-    monkeypatch.setattr(flow_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
+    monkeypatch.setattr(flow_mod, "default_backend", lambda: TruthBackend(capture_set))
     args = ["learn", str(capture_set), "--calibration", str(capture_set / "calibration.json")]
     store = str(tmp_path / "cli_fast.sqlite")
     out = CliRunner().invoke(app, [*args, "--store", store, "--json"])

@@ -28,10 +28,10 @@ import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.summary import score_capture_set
-from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
+from phonestereo.features.landmarks import LandmarkBackend
 from phonestereo.flows import application, learning
 from phonestereo.flows.config import FIXES, LOOKUPS, Corrector, FlowConfig
-from phonestereo.flows.learning import CachedBackend, stack_corrections
+from phonestereo.flows.learning import CachedBackend, default_backend, stack_corrections
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store import FixStore
@@ -178,7 +178,7 @@ def run_bench(
     if missing:
         raise InputError(f"the bench needs 'face' and 'verification' captures; {cs.root} has no "
                          f"{' or '.join(repr(k) for k in missing)} captures")  # fmt: skip
-    det = CachedBackend(backend if backend is not None else MediaPipeBackend())
+    det = CachedBackend(backend if backend is not None else default_backend())
     store = FixStore(store_path) if store_path is not None else None
     try:
         lr, res = learn_and_apply(cfg, cs, det, store=store, progress=progress)

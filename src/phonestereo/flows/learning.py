@@ -60,6 +60,37 @@ class CachedBackend(LandmarkBackend):
         return [self.detect(im) for im in images]
 
 
+class PairBackend(LandmarkBackend):
+    """One backend for the wide image and another for the tele of a ``detect_many([wide,
+    tele])`` call.
+
+    The tele's faces are three times larger and only pair the faces and start the disparity
+    search (the eye windows refine it), so it needs neither tiling for small faces nor mirror
+    averaging: :func:`default_backend` runs the tele ~3.5× faster (62 vs 219 ms per image,
+    the same faces found on the bench set).
+    """
+
+    name = "pair"
+
+    def __init__(self, wide: LandmarkBackend, tele: LandmarkBackend) -> None:
+        self.wide = wide
+        self.tele = tele
+
+    def detect(self, image: Any) -> FaceResult:
+        return self.wide.detect(image)
+
+    def detect_many(self, images: Iterable[Any]) -> list[FaceResult]:
+        ims = list(images)
+        if len(ims) != 2:
+            return self.wide.detect_many(ims)
+        return [self.wide.detect(ims[0]), self.tele.detect(ims[1])]
+
+
+def default_backend() -> LandmarkBackend:
+    """MediaPipe for the learning flow: full settings in the wide, fast ones in the tele."""
+    return PairBackend(MediaPipeBackend(), MediaPipeBackend(min_tile_px=1000, mirror_average=False))
+
+
 @dataclass(frozen=True)
 class CaptureLearning:
     """What one face capture gave: observations, or the gate/reason it was skipped."""
@@ -233,7 +264,7 @@ def run(
         raise InputError(
             f"capture set {cs.root} has no captures of kind 'face'; learning needs face captures"
         )
-    det = backend if backend is not None else MediaPipeBackend()
+    det = backend if backend is not None else default_backend()
     corr = stack_corrections(config, cs, faces, calibration)
     ref = reference_rectification(calibration.rig, config.mode)
     out, n_obs = [], 0
@@ -262,6 +293,8 @@ __all__ = [
     "CachedBackend",
     "CaptureLearning",
     "LearningResult",
+    "PairBackend",
+    "default_backend",
     "learn_face_capture",
     "run",
     "stack_corrections",
