@@ -96,7 +96,7 @@ def test_corrector_learns_offset_and_gain_and_keys_by_bucket() -> None:
     assert c.ok and abs(c.value_px[0] - (-2.5 + 0.045)) < 1e-3
     assert not corr.correct([[350.0, 400.0, 4.5]], "landscape-flipped").ok
     merged = Corrector(_obs(), FlowConfig(orientation_buckets=False))
-    assert merged.correct([[350.0, 400.0, 9.0]], "portrait-x+").ok
+    assert merged.correct([[350.0, 400.0, 9.0]], "portrait").ok
 
 
 def test_application_gates_and_failures_are_results() -> None:

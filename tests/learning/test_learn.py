@@ -73,7 +73,7 @@ def capture_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_orientation_bucket() -> None:
     assert orientation_bucket([0.0, 0.98, -0.2]) == "landscape"
-    assert orientation_bucket([0.0, 0.1, -0.99]) == "pointing-up"
+    assert orientation_bucket([0.0, 0.1, -0.99]) == "face-down"  # the fixes' bucket names (§3.4)
     with pytest.raises(InputError):
         orientation_bucket([0.0, 0.0, 0.0])
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
+from phonestereo.fixes.orientation import orientation_bucket
 from phonestereo.io import (
     Calibration,
     CaptureEntry,
@@ -46,32 +47,9 @@ from phonestereo.rectification import Rectification
 Progress = Callable[[int, int, str], None]
 
 
-def orientation_bucket(gravity: Any) -> str:
-    """Orientation label from the device-frame gravity vector (§3.4): its dominant axis.
-
-    Device frame as the camera's: x right, y down, z forward (DESIGN §5), so gravity (0, 1, 0)
-    is the device held in landscape.
-
-    >>> orientation_bucket([0.01, 0.999, 0.02]), orientation_bucket([0.0, -1.0, 0.0])
-    ('landscape', 'landscape-flipped')
-    >>> orientation_bucket([-0.9, 0.1, 0.3])
-    'portrait-x-'
-    """
-    g = np.asarray(gravity, dtype=np.float64).reshape(-1)
-    if g.shape != (3,) or not np.isfinite(g).all() or not np.any(g):
-        raise InputError(f"gravity must be a finite non-zero 3-vector, got {gravity!r}")
-    k = int(np.argmax(np.abs(g)))
-    positive = g[k] > 0
-    names = (
-        ("portrait-x+", "portrait-x-"),
-        ("landscape", "landscape-flipped"),
-        ("pointing-down", "pointing-up"),
-    )
-    return names[k][0 if positive else 1]
-
-
 def capture_orientation(entry: CaptureEntry) -> str:
-    """The capture's orientation label, else its gravity bucket, else ``"unknown"``."""
+    """The capture's orientation label, else its gravity bucket
+    (:func:`~phonestereo.fixes.orientation.orientation_bucket`, §3.4), else ``"unknown"``."""
     if entry.orientation:
         return str(entry.orientation)
     if entry.gravity is not None:
