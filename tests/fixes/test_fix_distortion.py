@@ -18,11 +18,15 @@ from phonestereo.errors import InputError, ShapeError
 from phonestereo.evaluation.chart_ruler import corner_keys, measure_capture, true_corners
 from phonestereo.fixes.distortion import (
     RadialResidualFix,
-    compare_lens_models,
     nondisparity_spread_by_mode,
     principal_point_rect,
     radial_geometry,
+)
+from phonestereo.fixes.lens_model_compare import (
+    compare_lens_models,
     radial_mapping_error,
+    radial_residual_profile,
+    systematic_radial_rms,
 )
 from phonestereo.geometry import Camera, Transform
 from phonestereo.io import load_calibration, load_capture_set
@@ -184,3 +188,17 @@ def test_odd_model_cuts_radial_error_three_times() -> None:
     # acceptance >= 3x; measured with 20 views: 0.89 px (opencv5) vs 0.15 px (radial-odd)
     assert err["opencv5"] > 3 * err["radial-odd"]
     assert fits["opencv5"].radial_rms_px > fits["radial-odd"].radial_rms_px
+
+
+def test_systematic_radial_rms_separates_model_error_from_noise() -> None:
+    """The binned profile keeps a radius-dependent residual and averages detection noise out."""
+    rng = np.random.default_rng(3)
+    r = rng.uniform(0.0, 1000.0, 1200)
+    noise = rng.normal(scale=0.02, size=r.size)
+    # noise alone: each of 12 bins averages ~100 points → ~0.02/√100 = 0.002 px
+    assert systematic_radial_rms(r, noise) < 0.004
+    # a 0.03 px rms radial model error (cubic in r) is kept within the noise floor
+    model = 0.03 * np.sqrt(7) * (r / 1000) ** 3  # rms over U(0, 1000) = 0.03
+    assert abs(systematic_radial_rms(r, model + noise) - 0.03) < 0.004
+    rb, db, n = radial_residual_profile(r, model)
+    assert n.sum() == r.size and np.all(np.diff(rb) > 0) and np.all(np.diff(db) > 0)

@@ -3,10 +3,8 @@
 Three fixes of DESIGN §7:
 
 (a) **Odd-degree radial terms** in the lens model (§3.2 fix 3): calibrate with ``radial-odd``
-    instead of the even-only ``opencv5``; :func:`compare_lens_models` calibrates the same board
-    views with each model and reports the radial component of the residuals
-    (:func:`radial_residuals`); :func:`radial_mapping_error` compares two cameras' pixel
-    mappings (e.g. a calibration against a known lens) radially.
+    instead of the even-only ``opencv5``; the comparison is in
+    :mod:`~phonestereo.fixes.lens_model_compare`.
 (b) **Undistort-both** rectification (§3.2 fix 2): a mode of
     :class:`~phonestereo.rectification.Rectification`; :func:`nondisparity_spread_by_mode`
     compares the spread of e in each mode on the same matches.
@@ -32,10 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from phonestereo.calibration.solve import CalibrationOptions, CalibrationResult, calibrate_camera
-from phonestereo.calibration.views import BoardView
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.geometry import Camera
 from phonestereo.geometry._checks import as_points
 from phonestereo.rectification import MODES, Rectification
 
@@ -282,117 +277,13 @@ def nondisparity_spread_by_mode(
 
 
 # --- (a) odd-degree lens models ---------------------------------------------------------------
-def radial_residuals(result: CalibrationResult, camera_index: int = 0) -> tuple[F64, F64]:
-    """Radius r (M,) px and radial component dr (M,) px of a calibration's inlier residuals
-    (predicted − observed) about that camera's principal point (Figure 3-6 style)."""
-    cam = result.cameras[camera_index]
-    sel = (result.camera_index == camera_index) & result.inliers
-    r, u = radial_geometry(result.image_points[sel], (cam.cx, cam.cy))
-    return r, np.sum(result.residuals[sel] * u, axis=1)
-
-
-def radial_mapping_error(
-    reference: Camera,
-    other: Camera,
-    *,
-    max_radius_px: float | None = None,
-    n: int = 41,
-    remove_scale: bool = False,
-) -> tuple[F64, F64]:
-    """Radial pixel difference of two cameras' mappings over the reference image.
-
-    Rays through an n × n grid of ``reference`` pixels (within ``max_radius_px`` of its
-    principal point, if given) are projected by ``other``; returns the radius r (M,) px and
-    the radial component dr (M,) px of other − reference. Use it to compare a calibrated
-    camera with a known lens (a simulator's, or a lab reference). ``remove_scale`` subtracts
-    the best linear term a·r (a focal-length difference, not distortion) first.
-
-    Examples
-    --------
-    >>> cam = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)
-    >>> r, dr = radial_mapping_error(cam, cam.scaled(1.001), max_radius_px=500)
-    >>> round(float(np.max(dr)), 2)          # a 0.1 % scale error is 0.5 px at r = 500 px
-    0.5
-    """
-    w, h = reference.size
-    gx, gy = np.meshgrid(np.linspace(0, w - 1, n), np.linspace(0, h - 1, n))
-    q = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    r, u = radial_geometry(q, (reference.cx, reference.cy))
-    keep = np.ones(len(q), bool) if max_radius_px is None else r <= max_radius_px
-    xy = reference.pixel_to_normalized(q[keep])
-    rays = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
-    dq = other.project(rays) - q[keep]
-    dr = np.sum(dq * u[keep], axis=1)
-    ok = np.isfinite(dr)
-    rk, dr = r[keep][ok], dr[ok]
-    if remove_scale and len(rk):
-        dr = dr - rk * float(rk @ dr) / max(float(rk @ rk), 1e-12)
-    return rk, dr
-
-
-@dataclass(frozen=True)
-class LensModelFit:
-    """One lens model's calibration of a camera and its residuals.
-
-    ``rms_px``: per-point RMS of all inlier residuals; ``radial_rms_px``: RMS of their radial
-    component (what an insufficient radial model leaves, §3.2 reason 2).
-    """
-
-    model: str
-    camera: Camera
-    rms_px: float
-    radial_rms_px: float
-    result: CalibrationResult
-
-
-def compare_lens_models(
-    views: Sequence[BoardView],
-    size: tuple[int, int],
-    models: Sequence[str] = ("opencv5", "radial-odd"),
-    *,
-    n_radial: int = 4,
-) -> dict[str, LensModelFit]:
-    """Calibrate the same board views with each lens model (thesis §3.2 fix 3).
-
-    Parameters
-    ----------
-    views : sequence of BoardView
-        One camera's board views (>= 3 tilted poses).
-    size : (int, int)
-        Image (width, height), px.
-    models : sequence of str
-        Lens model names (``opencv5`` even-only, ``radial-odd`` with the odd degrees).
-    n_radial : int
-        Radial terms of ``radial-odd`` (4: r..r⁴, one more than opencv5's r², r⁴, r⁶; more
-        terms extrapolate wildly beyond the observed radius).
-
-    Returns
-    -------
-    dict of str to LensModelFit
-    """
-    out = {}
-    for model in models:
-        res = calibrate_camera(views, size, CalibrationOptions(model=model, n_radial=n_radial))
-        _, dr = radial_residuals(res)
-        out[model] = LensModelFit(
-            model,
-            res.cameras[0],
-            res.rms_px_per_point,
-            float(np.sqrt(np.mean(dr**2))) if len(dr) else float("nan"),
-            res,
-        )
-    return out
 
 
 __all__ = [
     "MIN_SHARE",
-    "LensModelFit",
     "RadialResidualFix",
-    "compare_lens_models",
     "nondisparity_spread_by_mode",
     "principal_point_rect",
     "radial_geometry",
-    "radial_mapping_error",
     "radial_projection",
-    "radial_residuals",
 ]
