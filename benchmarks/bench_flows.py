@@ -4,7 +4,9 @@ On a small rendered thesis-bench capture set (``folded-x3``, 2000 × 1500 wide; 
 1, 2, 3 m × 5 sensor positions, one attempt each; verification at 0.8 … 4 m, one attempt):
 
 * **application phase** per verification capture: ``flows.application.run`` with the images
-  decoded beforehand (decode excluded), the learned corrector from the same set's faces; the
+  decoded beforehand (decode excluded), the learned corrector from the same set's faces and
+  the calibration's reference rectification built once (as ``evaluate`` and ``depth`` do; its
+  time is reported per calibration); the
   minimum of ``--repeat`` runs per capture, the median over captures (target ≤ 50 ms). A
   cProfile pass gives the time per block (cumulative per capture) and the top functions.
   Compared in the same run with the obvious alternative: ``cv2.StereoSGBM`` over the same
@@ -42,10 +44,16 @@ from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.flows import application
 from phonestereo.flows import learning as learning_flow
 from phonestereo.flows.config import Corrector, FlowConfig
-from phonestereo.flows.learning import CachedBackend, learn_face_capture, stack_corrections
+from phonestereo.flows.learning import (
+    CachedBackend,
+    default_backend,
+    learn_face_capture,
+    stack_corrections,
+)
 from phonestereo.flows.roi_disparity import reference_rectification, roi_grid
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning import learn as learn_mod
+from phonestereo.learning.pair_guide import WideToTeleGuide
 from phonestereo.rectification import Rectification, RectifyOptions
 
 #: Blocks of the application phase reported from the profile: label → function name (file
@@ -76,11 +84,12 @@ LEARN_BLOCKS = (
     ("Rectification.from_rig (all)", "rectification/rectify.py", "from_rig"),
     ("cv2.remap / maps (all)", "rectification/rectify.py", "remap"),
 )
-#: What-if variants of the landmark backend (same face images): label → MediaPipeBackend kwargs.
-LANDMARK_VARIANTS: tuple[tuple[str, dict[str, Any]], ...] = (
-    ("default", {}),
-    ("mirror_average=False", {"mirror_average": False}),
-    ("min_tile_px=1000", {"min_tile_px": 1000}),
+#: Variants of the landmark step (same face images): label → (backend factory, guided by the
+#: tele). The first is the learning flow's; the others are the obvious alternatives.
+LANDMARK_VARIANTS: tuple[tuple[str, Any, bool], ...] = (
+    ("flow default: wide two-level tiles, tele guided by it", default_backend, True),
+    ("the same, tele searched (tiles of 1000 px)", default_backend, False),
+    ("MediaPipeBackend() on both, unguided", MediaPipeBackend, False),
 )
 #: What-if variants of the application phase (same images): fewer keypoints in the ROI.
 KEYPOINT_VARIANTS = (400, 200)
@@ -161,6 +170,13 @@ class TimedBackend(LandmarkBackend):
         t0 = time.perf_counter()
         try:
             return self.backend.detect_many(images)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    def detect_pair(self, wide: Any, tele: Any, guide: Any = None) -> tuple[FaceResult, FaceResult]:
+        t0 = time.perf_counter()
+        try:
+            return self.backend.detect_pair(wide, tele, guide)
         finally:
             self.seconds += time.perf_counter() - t0
 
@@ -293,10 +309,16 @@ def bench_application(
     images = decode_all(cs, "verification")
     entries = [cs.get(cid) for cid in images]
     focus = stack_corrections(cfg, cs, entries, cal)
+    # Per calibration, not per capture: `evaluate` and `depth` build it once and pass it.
+    t0 = time.perf_counter()
+    ref = reference_rectification(cal.rig, cfg.mode)
+    ref_ms = 1000 * (time.perf_counter() - t0)
 
     def inputs(e: Any) -> application.ApplicationInputs:
         w, t = images[e.id]
-        return application.ApplicationInputs(cal, e, w, t, corrector, focus=focus.get(e.id))
+        return application.ApplicationInputs(
+            cal, e, w, t, corrector, focus=focus.get(e.id), reference=ref
+        )
 
     z_true = _true_roi_depths(cs)
     application.run(cfg, inputs(entries[0]))  # warm-up (imports, OpenCV init)
@@ -363,6 +385,7 @@ def bench_application(
             for r in rows
         ),
         "median_ms": round(med, 2),
+        "reference_rectification_ms_per_calibration": round(ref_ms, 2),
         "median_cpu_ms": round(float(np.median([r["cpu_ms"] for r in rows])), 2),
         "max_ms": round(max(r["ms"] for r in rows), 2),
         "target_ms": 50.0,
@@ -383,15 +406,20 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
     images = decode_all(cs, "face")
     entries = [cs.get(cid) for cid in images]
     focus = stack_corrections(cfg, cs, entries, cal)
-    mp = MediaPipeBackend()
-    mp.detect(np.full((240, 320), 128, np.uint8))  # model load outside the timing
-    cache = CachedBackend(mp)
+    mp = default_backend()  # the flow's: the wide searched, the tele guided by its faces
+    blank = np.full((240, 320), 128, np.uint8)
+    mp.detect_many([blank, blank])  # model load outside the timing
+    ref = reference_rectification(cal.rig, cfg.mode)  # once per set, as learning.run does
     rows, obs = [], []
+
+    def learn(e: Any, backend: Any) -> Any:
+        return learn_face_capture(cfg, cs, e, cal, backend, focus=focus.get(e.id), reference=ref)
+
     with _MemoryReads(cs, images):
         for e in entries:
-            tb = TimedBackend(cache)
+            tb = TimedBackend(mp)
             t0 = time.perf_counter()
-            r = learn_face_capture(cfg, cs, e, cal, tb, focus=focus.get(e.id))
+            r = learn(e, tb)
             total = time.perf_counter() - t0
             obs += list(r.observations)
             rows.append({
@@ -399,20 +427,19 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
                 "total_ms": round(1000 * total, 1), "landmarks_ms": round(1000 * tb.seconds, 1),
                 "rest_ms": round(1000 * (total - tb.seconds), 1),
             })  # fmt: skip
-        # The rest, profiled, with the landmarks now served from the cache.
-        stats = _profile(
-            lambda: [
-                learn_face_capture(cfg, cs, e, cal, cache, focus=focus.get(e.id)) for e in entries
-            ]
-        )
+        # The rest, profiled, with the landmarks served from a cache (filled first).
+        cache = CachedBackend(mp)
+        for e in entries:
+            learn(e, cache)
+        stats = _profile(lambda: [learn(e, cache) for e in entries])
         rest_cached = []
         for e in entries:
             t0 = time.perf_counter()
-            learn_face_capture(cfg, cs, e, cal, cache, focus=focus.get(e.id))
+            learn(e, cache)
             rest_cached.append(time.perf_counter() - t0)
     out = {
         "captures": rows,
-        "landmark_variants": landmark_variants(images),
+        "landmark_variants": landmark_variants(images, cal),
         "median_total_ms": round(float(np.median([r["total_ms"] for r in rows])), 1),
         "median_landmarks_ms": round(float(np.median([r["landmarks_ms"] for r in rows])), 1),
         "median_rest_ms": round(float(np.median([r["rest_ms"] for r in rows])), 1),
@@ -425,21 +452,26 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
     return out, obs
 
 
-def landmark_variants(images: dict[str, tuple[np.ndarray, np.ndarray]]) -> list[dict[str, Any]]:
-    """``detect_many([wide, tele])`` per face capture under each of :data:`LANDMARK_VARIANTS`:
-    median ms and the faces found (wide + tele, summed over the captures)."""
+def landmark_variants(
+    images: dict[str, tuple[np.ndarray, np.ndarray]], cal: Any
+) -> list[dict[str, Any]]:
+    """``detect_pair(wide, tele[, guide])`` per face capture under each of
+    :data:`LANDMARK_VARIANTS`: median ms and the faces found (wide + tele, summed)."""
+    guide = WideToTeleGuide(reference_rectification(cal.rig, FlowConfig().mode))
+    blank = np.full((240, 320), 128, np.uint8)
     out = []
-    for label, kw in LANDMARK_VARIANTS:
-        mp = MediaPipeBackend(**kw)
-        mp.detect(np.full((240, 320), 128, np.uint8))  # model load outside the timing
-        ts, n_faces = [], 0
+    for label, factory, guided in LANDMARK_VARIANTS:
+        mp = factory()
+        mp.detect_many([blank, blank])  # model load outside the timing
+        ts, n_wide, n_tele = [], 0, 0
         for w, t in images.values():
             t0 = time.perf_counter()
-            res = mp.detect_many([w, t])
+            fw, ft = mp.detect_pair(w, t, guide if guided else None)
             ts.append(time.perf_counter() - t0)
-            n_faces += sum(len(r.faces) for r in res)
+            n_wide, n_tele = n_wide + len(fw.faces), n_tele + len(ft.faces)
         out.append({"variant": label, "median_ms": round(1000 * float(np.median(ts)), 1),
-                    "faces_found": n_faces})  # fmt: skip
+                    "faces_found": n_wide + n_tele, "wide_faces": n_wide,
+                    "tele_faces": n_tele})  # fmt: skip
     return out
 
 
@@ -477,6 +509,8 @@ def _print(res: dict[str, Any]) -> None:
     print(f"{'measure':48s} {'value':>10s} {'target':>8s}")
     print(f"{'application phase, median ms/capture':48s} {a['median_ms']:10.1f} {50:8d}")
     print(f"{'application phase, max ms/capture':48s} {a['max_ms']:10.1f}")
+    print(f"{'  + reference rectification, once per calibration':48s} "
+          f"{a['reference_rectification_ms_per_calibration']:10.1f}")  # fmt: skip
     print(f"{'application phase, median CPU ms/capture':48s} {a['median_cpu_ms']:10.1f}")
     print(f"{'verification captures measured (ok / all)':48s} "
           f"{a['n_ok']:>5d} / {len(a['captures'])}")  # fmt: skip
@@ -497,8 +531,9 @@ def _print(res: dict[str, Any]) -> None:
     print(f"{'  the rest, landmarks cached (re-run)':48s} "
           f"{lr['median_rest_cached_landmarks_ms']:10.1f}")  # fmt: skip
     for v in lr["landmark_variants"]:
-        label = f"  landmarks only, MediaPipe {v['variant']}, ms"
-        print(f"{label:48s} {v['median_ms']:10.1f}   faces found {v['faces_found']}")
+        label = f"  landmarks only: {v['variant']}, ms"
+        print(f"{label:60s} {v['median_ms']:8.1f}   faces wide {v['wide_faces']}, "
+              f"tele {v['tele_faces']}")  # fmt: skip
     print("\napplication phase blocks (cProfile, cumulative ms per capture):")
     for b in a["blocks_profiled"]:
         print(f"  {b['block']:44s} {b['ms_per_capture']:8.2f}")

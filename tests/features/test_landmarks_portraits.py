@@ -131,3 +131,21 @@ def test_rolled_faces_are_found_with_quarter_turns() -> None:
     expect = np.column_stack([img.shape[0] - 1 - upright.pupils_px[:, 1], upright.pupils_px[:, 0]])
     got = res.faces[0].pupils_px
     assert np.allclose(np.sort(got, axis=0), np.sort(expect, axis=0), atol=2.0)
+
+
+@needs_data
+def test_detect_in_boxes_measures_the_face_without_searching(measured) -> None:
+    """The guided path (Face Mesh on a given box, no tiled search) finds the same face."""
+    name = sorted(measured)[0]
+    img = cv2.imread(str(DATA / name))
+    full = measured[name]["scales"][0]
+    face = full.faces[0]
+    mp = MediaPipeBackend()
+    got = mp.detect_in_boxes(img, [tuple(face.box_px)])
+    assert len(got.faces) == 1
+    # another crop of the same face: pupils within ~1 px, IPD within 1 % (measured 0.1–0.4 %)
+    assert np.abs(got.faces[0].pupils_px - face.pupils_px).max() < 2.0
+    assert got.faces[0].ipd_px == pytest.approx(face.ipd_px, rel=0.01)
+    h, w = img.shape[:2]
+    corner = mp.detect_in_boxes(img, [(0.0, 0.0, 0.1 * w, 0.1 * h)])
+    assert not corner.found and corner.reason

@@ -60,6 +60,9 @@ class TruthBackend(LandmarkBackend):
     def detect_many(self, images: Iterable[Any]) -> list[FaceResult]:
         return list(self.queue.pop(0))
 
+    def detect_pair(self, wide: Any, tele: Any, guide: Any = None) -> tuple[FaceResult, ...]:
+        return tuple(self.queue.pop(0))  # the truth needs no guide
+
 
 @pytest.fixture(scope="module")
 def capture_set(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -21,7 +21,7 @@ import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
-from phonestereo.features.landmarks.base import FaceResult
+from phonestereo.features.landmarks.base import FaceResult, TeleGuide, guided_pair
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
 from phonestereo.flows.gates import Gate, capture_gates, first_failed
@@ -44,6 +44,7 @@ class CachedBackend(LandmarkBackend):
     def __init__(self, backend: LandmarkBackend) -> None:
         self.backend = backend
         self._cache: dict[str, FaceResult] = {}
+        self._pairs: dict[str, tuple[FaceResult, FaceResult]] = {}
 
     @staticmethod
     def _key(image: Any) -> str:
@@ -59,15 +60,21 @@ class CachedBackend(LandmarkBackend):
     def detect_many(self, images: Iterable[Any]) -> list[FaceResult]:
         return [self.detect(im) for im in images]
 
+    def detect_pair(
+        self, wide: Any, tele: Any, guide: TeleGuide | None = None
+    ) -> tuple[FaceResult, FaceResult]:
+        key = self._key(wide) + self._key(tele) + ("" if guide is None else guide.key)
+        if key not in self._pairs:
+            self._pairs[key] = self.backend.detect_pair(wide, tele, guide)
+        return self._pairs[key]
+
 
 class PairBackend(LandmarkBackend):
     """One backend for the wide image and another for the tele of a ``detect_many([wide,
-    tele])`` call.
+    tele])`` or :meth:`detect_pair` call.
 
-    The tele's faces are three times larger and only pair the faces and start the disparity
-    search (the eye windows refine it), so it needs neither tiling for small faces nor mirror
-    averaging: :func:`default_backend` runs the tele ~3.5× faster (62 vs 219 ms per image,
-    the same faces found on the bench set).
+    With a guide (:class:`~phonestereo.learning.pair_guide.WideToTeleGuide`) the tele is
+    not searched: it is measured only where the wide's faces map to.
     """
 
     name = "pair"
@@ -85,10 +92,25 @@ class PairBackend(LandmarkBackend):
             return self.wide.detect_many(ims)
         return [self.wide.detect(ims[0]), self.tele.detect(ims[1])]
 
+    def detect_pair(
+        self, wide: Any, tele: Any, guide: TeleGuide | None = None
+    ) -> tuple[FaceResult, FaceResult]:
+        return guided_pair(self.wide, self.tele, wide, tele, guide)
+
 
 def default_backend() -> LandmarkBackend:
-    """MediaPipe for the learning flow: full settings in the wide, fast ones in the tele."""
-    return PairBackend(MediaPipeBackend(), MediaPipeBackend(min_tile_px=1000, mirror_average=False))
+    """MediaPipe for the learning flow (measured in ``benchmarks/bench_flows.py``).
+
+    The wide is searched with two tile levels (13 detector runs instead of 42, the same faces
+    found on the bench sets) and without mirror averaging (no loss of depth accuracy on the
+    bench: the chart plane averages the faces' IPDs); the tele, guided by the wide's faces,
+    is only measured. The tele's faces are three times larger and only pair the faces and
+    start the disparity search (the eye windows refine it), so it needs no mirror averaging.
+    """
+    return PairBackend(
+        MediaPipeBackend(mirror_average=False, two_level_tiles=(0.35, 0.08)),
+        MediaPipeBackend(min_tile_px=1000, mirror_average=False),
+    )
 
 
 @dataclass(frozen=True)
@@ -182,7 +204,9 @@ def learn_face_capture(
     if ref is None or ref.mode != config.mode:
         ref = reference_rectification(calibration.rig, config.mode)
     rect = ref if rig is calibration.rig else reference_rectification(rig, config.mode)
-    res = learn_capture(cs, entry.id, rect, ipd_m=ipd_m, backend=backend)
+    path_w, path_t = cs.image_paths(entry.id)
+    imgs = (read_gray(path_w), read_gray(path_t))  # decoded once for both blocks
+    res = learn_capture(cs, entry.id, rect, ipd_m=ipd_m, backend=backend, images=imgs)
     stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s}
     obs = res.observations
     if not obs:
@@ -193,7 +217,6 @@ def learn_face_capture(
         wt = None
         why = "the faces are not inside the tele's view"
         if box is not None:
-            imgs = [read_gray(p) for p in cs.image_paths(entry.id)]
             m = measure_roi(
                 rig, imgs[0], imgs[1], box, replace(config.roi, expand=1.0, coarse_expand=1.0), rect
             )

@@ -40,6 +40,7 @@ from phonestereo.learning.landmark_disparity import (
     landmark_disparity,
 )
 from phonestereo.learning.observation import Observation
+from phonestereo.learning.pair_guide import WideToTeleGuide
 from phonestereo.learning.store import FixStore
 from phonestereo.rectification import Rectification
 
@@ -95,6 +96,8 @@ def learn_capture(
     source: str = "face-chart",
     depth_mode: DepthMode = "chart",
     backend: LandmarkBackend | None = None,
+    guided: bool = True,
+    images: tuple[Any, Any] | None = None,
 ) -> LearnResult:
     """Learn the disparity observations of one face capture.
 
@@ -115,6 +118,12 @@ def learn_capture(
         :func:`~phonestereo.learning.landmark_disparity.ipd_depths`).
     backend : LandmarkBackend, optional
         Default: :class:`MediaPipeBackend`.
+    guided : bool
+        Find the faces in the wide and measure the tele only where they map to
+        (:class:`~phonestereo.learning.pair_guide.WideToTeleGuide`). False: search the whole
+        tele image too.
+    images : (wide, tele) arrays, optional
+        The capture's decoded images, when the caller has them (else read from the set).
 
     Returns
     -------
@@ -123,10 +132,14 @@ def learn_capture(
     """
     t0 = time.perf_counter()
     entry = capture_set.get(capture_id)
-    path_w, path_t = capture_set.image_paths(capture_id)
-    img_w, img_t = read_gray(path_w), read_gray(path_t)
+    if images is None:
+        path_w, path_t = capture_set.image_paths(capture_id)
+        img_w, img_t = read_gray(path_w), read_gray(path_t)
+    else:
+        img_w, img_t = images
     det = backend if backend is not None else MediaPipeBackend()
-    faces_w, faces_t = det.detect_many([img_w, img_t])
+    guide = WideToTeleGuide(rect, ipd_m) if guided else None
+    faces_w, faces_t = det.detect_pair(img_w, img_t, guide)
     t1 = time.perf_counter()
     res = landmark_disparity(
         rect, img_w, img_t, faces_w, faces_t, ipd_m=ipd_m, depth_mode=depth_mode

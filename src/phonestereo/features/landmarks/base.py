@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import os
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -229,6 +229,80 @@ class LandmarkBackend(ABC):
     def detect_many(self, images: Iterable[ImageLike]) -> list[FaceResult]:
         """:meth:`detect` on each image, in order."""
         return [self.detect(im) for im in images]
+
+    def detect_in_boxes(self, image: ImageLike, boxes: Sequence[BoxPx]) -> FaceResult:
+        """Faces of ``image`` whose pupil midpoint lies in one of ``boxes`` (x0, y0, x1, y1) px.
+
+        A backend with a costly face search overrides this to look only there; this default
+        runs :meth:`detect` and keeps the faces inside a box.
+        """
+        res = self.detect(image)
+
+        def inside(f: Face) -> bool:
+            x, y = f.midpoint_px
+            return any(b[0] <= x <= b[2] and b[1] <= y <= b[3] for b in boxes)
+
+        kept = [f for f in res.faces if inside(f)]
+        why = "no face found in the given boxes"
+        return make_result(
+            kept, res.image_size, res.backend, rejected=res.rejected, notes=res.notes,
+            empty_reason=why,
+        )  # fmt: skip
+
+    def detect_pair(
+        self, wide: ImageLike, tele: ImageLike, guide: TeleGuide | None = None
+    ) -> tuple[FaceResult, FaceResult]:
+        """Faces of a wide/tele pair: (wide result, tele result).
+
+        With a ``guide`` (a wide face → the raw-tele box where the same face is), the wide is
+        searched and the tele measured only in the guided boxes (:meth:`detect_in_boxes`):
+        the tele sees a part of the wide's view, three times larger, so searching it again
+        is wasted work.
+        """
+        if guide is None:
+            fw, ft = self.detect_many([wide, tele])
+            return fw, ft
+        return guided_pair(self, self, wide, tele, guide)
+
+
+def guided_pair(
+    wide_backend: LandmarkBackend,
+    tele_backend: LandmarkBackend,
+    wide: ImageLike,
+    tele: ImageLike,
+    guide: TeleGuide | None,
+) -> tuple[FaceResult, FaceResult]:
+    """:meth:`LandmarkBackend.detect_pair` with one backend per camera: the wide first, then
+    the tele in the boxes ``guide`` maps the wide's faces to (everywhere without a guide)."""
+    fw = wide_backend.detect(wide)
+    if guide is None:
+        return fw, tele_backend.detect(tele)
+    boxes = [b for b in (guide(f) for f in fw.faces) if b is not None]
+    if not boxes:
+        why = f"no wide face to look for in the tele ({fw.reason or 'none maps into it'})"
+        return fw, make_result([], _size(tele), tele_backend.name, empty_reason=why)
+    return fw, tele_backend.detect_in_boxes(tele, boxes)
+
+
+#: A face box in pixels: (x0, y0, x1, y1).
+BoxPx = tuple[float, float, float, float]
+
+
+class TeleGuide(Protocol):
+    """Where a wide face is in the raw tele image (see :meth:`LandmarkBackend.detect_pair`)."""
+
+    @property
+    def key(self) -> str:
+        """Identifies the mapping (equal keys → equal boxes), for caches."""
+
+    def __call__(self, wide_face: Face) -> BoxPx | None:
+        """The raw-tele box of the same face, or None when it is not in the tele's view."""
+
+
+def _size(image: ImageLike) -> tuple[int, int]:
+    """(W, H) of an image array or file."""
+    a = image if isinstance(image, np.ndarray) else as_rgb(image)
+    return int(a.shape[1]), int(a.shape[0])
 
 
 def read_color(path: str | os.PathLike[str]) -> U8:
