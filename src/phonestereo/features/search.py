@@ -172,7 +172,9 @@ def ncc_search(
     d0 = np.where(inner, max_d - ix - fx, nan)
     e0 = np.where(inner, ty - iy - fy, nan)
     lr_ok = np.zeros(n, bool)
-    lr_run = inner & (best >= lr_min_score) & ~(second >= lr_uniqueness * best)
+    # second ≥ ∞ · score only holds for a negative score; said so to avoid forming ∞ · 0
+    unique = best >= 0 if np.isinf(lr_uniqueness) else ~(second >= lr_uniqueness * best)
+    lr_run = inner & (best >= lr_min_score) & unique
     for i in np.flatnonzero(lr_run).tolist():  # the right window back along the left row y
         x, y = int(pts[i, 0]), int(pts[i, 1])
         xr, yr = x - max_d + int(ix[i]), y - ty + int(iy[i])
