@@ -8,6 +8,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -58,6 +60,18 @@ def test_vectorised_search_equals_the_per_keypoint_reference(min_d, max_d, ty) -
     inner = s.searched & ~s.at_edge
     assert inner.sum() > 250
     assert np.median(np.abs(s.d0[inner] - 9)) < 0.05  # px: the true shift is 9
+
+
+def test_zero_score_windows_search_quietly() -> None:
+    # a flat right image: every NCC is 0 (OpenCV's zero-variance result); with the left-right
+    # uniqueness test off (lr_uniqueness = ∞, the default) no ∞ · 0 warning, no back search
+    left = _texture((60, 120), 0)
+    right = np.full_like(left, 100.0)
+    xy = np.array([[60, 30], [80, 25]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = ncc_search(left, right, xy, radius=7, min_d=0, max_d=30, row_tolerance=1)
+    assert s.searched.all() and np.all(s.score == 0.0) and not s.lr_ok.any()
 
 
 def _reference_dog(img, box, threshold, max_keypoints, edge_ratio=10.0):
