@@ -172,7 +172,7 @@ def ncc_search(
     d0 = np.where(inner, max_d - ix - fx, nan)
     e0 = np.where(inner, ty - iy - fy, nan)
     lr_ok = np.zeros(n, bool)
-    # second ≥ ∞ · score only holds for a negative score; said so to avoid forming ∞ · 0
+    # with lr_uniqueness = ∞, second ≥ ∞ · score holds only for a negative score (∞ · 0 is NaN)
     unique = best >= 0 if np.isinf(lr_uniqueness) else ~(second >= lr_uniqueness * best)
     lr_run = inner & (best >= lr_min_score) & unique
     for i in np.flatnonzero(lr_run).tolist():  # the right window back along the left row y
