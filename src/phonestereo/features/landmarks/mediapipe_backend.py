@@ -336,17 +336,18 @@ class MediaPipeBackend(LandmarkBackend):
         run's eye labels are swapped)."""
         x0, y0, x1, y1 = box[:4]
         side = max(round(self.crop_scale * max(x1 - x0, y1 - y0)), 16)
-        if side > self.crop_px[1]:
+        lo, hi = self.crop_px
+        if side > hi:
             # Shrink by a whole factor k (the crop grown by < k px to a multiple of it):
             # OpenCV's area interpolation is ~20× faster at integer ratios.
-            k = -(-side // self.crop_px[1])
+            k = -(-side // hi)
             side = k * -(-side // k)
+            n = side // k
+        else:
+            n = max(side, lo)
         cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
         X0, Y0 = round(cx - 0.5 * (side - 1)), round(cy - 0.5 * (side - 1))
         crop = _crop(rgb, X0, Y0, side)
-        n = int(np.clip(side, self.crop_px[0], self.crop_px[1]))
-        if side > self.crop_px[1]:
-            n = side // k
         if n != side:
             interp = cv2.INTER_AREA if n < side else cv2.INTER_CUBIC
             crop = cv2.resize(crop, (n, n), interpolation=interp)
