@@ -39,11 +39,30 @@ def test_motorcycle_accuracy(motorcycle: tuple) -> None:
     assert out["matches"] >= 300, out  # measured 418
     assert out["within_0.5px"] >= 0.90, out  # measured 0.98
     # measured: ours 0.063 px, NCC + parabola 0.098, SGBM 0.169 → ratio 0.64. The issue asks
-    # ≤ 0.6; not met here: every matcher is offset from this GT by a common +0.03…+0.08 px
-    # (signed medians: ours +0.046, NCC +0.033, SGBM +0.082), which bounds the median error.
+    # ≤ 0.6; not met here: the images are offset from this GT by about +0.05 px (signed
+    # medians: ours +0.046, NCC +0.033, SGBM +0.082), which bounds the median error. The offset
+    # is in the data, not in our fit: matching right → left gives the same +0.050, a dense
+    # GT-warped ZNCC over all textured pixels +0.05, and the same pair with its left image
+    # re-made from the right through the GT (below) moves all three signed medians by −0.054
+    # (ours −0.009, NCC −0.021, SGBM +0.029). NCC's smaller signed median is its own parabola
+    # bias (−0.02) partly cancelling the offset.
     # Guard the measured value (with ~10 % slack for platform differences) and the order.
     assert out["ratio_to_best_baseline"] <= 0.7, out
     assert med["ours"] < med["ncc_parabola"] < med["sgbm"], out
+
+
+def test_motorcycle_gt_consistent_pair(motorcycle: tuple) -> None:
+    # the left image re-made from the right one through the GT: real texture and surfaces, but
+    # disparity = GT, so the offset of the real images from the GT is gone and what remains is
+    # our matcher's own error (depth structure inside the windows, noise)
+    left, right, gt, ndisp = motorcycle
+    out = bench.evaluate_real(bench.gt_consistent_left(left, right, gt), right, gt, ndisp)
+    med, signed = out["median_abs_err_px"], out["median_signed_err_px"]
+    assert out["matches"] >= 400, out  # measured 526
+    # measured: ours 0.037 px (signed −0.009), NCC + parabola 0.100, ratio 0.37
+    assert abs(signed["ours"]) <= 0.02, out
+    assert med["ours"] <= 0.045, out
+    assert out["ratio_to_best_baseline"] <= 0.45, out
 
 
 def test_nonoccluded_mask_removes_the_shadow_of_a_near_step() -> None:
