@@ -5,7 +5,9 @@ corners are detected in the PNGs (OpenCV order + saddle refinement), and:
 
 - the stereo calibration (``radial-odd``, the true 4 radial terms) is compared with the
   ground truth through its own covariance: fraction of parameters within 3σ, RMS and max |z|,
-  the mean squared Mahalanobis distance per parameter (1 for an exact covariance);
+  the mean squared Mahalanobis distance per parameter (1 for an exact covariance); beside it
+  the same figures of the iid reference (``*_iid_*``: the detected corners moved to their true
+  projections plus iid noise at the solve's σ, where the covariance is exact by construction);
 - the even-only ``opencv5`` model is solved on the same corners: RMS per point of both, with
   outlier rejection (the default) and without it;
 - the single-shot three-plane chart is solved the same way (its z-scores and RMS);
@@ -93,6 +95,7 @@ def main() -> None:
     three = [r["three_plane"] for r in results]
     out: dict[str, float] = {"seeds": args.seeds}
     out |= {f"boards_{k}": v for k, v in z_summary(boards).items()}
+    out |= {f"boards_iid_{k}": v for k, v in z_summary(boards, "_iid").items()}
     out |= {f"three_plane_{k}": v for k, v in z_summary(three).items()}
     for name, runs in (("boards", boards), ("three_plane", three)):
         out[f"{name}_odd_rms_px_per_point_median"] = _median(runs, "rms_px_per_point")

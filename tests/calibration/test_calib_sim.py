@@ -16,10 +16,13 @@ hold literally: with 134 parameters per seed a Gaussian puts 0.27 % of them beyo
   and RMS z ≤ 1.3 — looser than an exact covariance gives (99.7 %, 1.0) because z of one
   seed are strongly correlated (its 18 board poses share a few modes), so they come in lumps.
 
-Measured (see the report): the covariance is a few % optimistic, concentrated in the weak
-modes (focal length vs board distance, tele radial terms): rendered corners carry a
-deterministic error (quantisation, aliasing; ≈ 0.005 px RMS, 16 % of the error variance)
-that the iid-noise covariance cannot know about.
+Measured (see the report; 20 seeds): d²/P 1.136, 98.69 % within 3σ, RMS z 1.18, max |z| 3.45.
+The iid reference on the same geometry (true projections + iid noise at each solve's σ, so the
+covariance is exact by construction) gives 1.003, 99.40 %, 1.04 and 3.69: "every z within 3"
+is out of reach of any exact covariance. Ours is ~6 % optimistic in σ, in the weak modes (focal
+length vs board distance, principal point, tele radial terms), because rendered corner errors
+are not iid Gaussian: a deterministic part (quantisation, aliasing; 0.0035 px RMS, 15 % of the
+error variance, measured on noise-free renders of the same seeds) and slightly heavy tails.
 """
 
 from __future__ import annotations
@@ -155,9 +158,10 @@ def test_twenty_seeds_every_parameter_within_its_covariance() -> None:
     with ProcessPoolExecutor() as pool:
         runs = list(pool.map(evaluate_seed, range(20), [CalibrationConfig()] * 20))
     s = z_summary(runs)
+    ref = z_summary(runs, "_iid")
     ratio_all = [r["even_all"][0] / r["odd_all"][0] for r in runs]
     ratio_wide = [r["even_reject"][1] / r["odd_reject"][1] for r in runs]
-    print(json.dumps(s), "ratios", np.round(ratio_all, 2), np.round(ratio_wide, 2))
+    print(json.dumps(s), json.dumps(ref), "ratios", np.round(ratio_all, 2), np.round(ratio_wide, 2))
     # Every board found where it was planned whole (a centred wide pose may fit the tele too).
     assert all(r["views"][0] == 18 and r["views"][1] >= 6 for r in runs)
     # The covariance as a whole: mean d²/P = 1 ± 0.027 for an exact one (20 × χ²₁₃₄); the
@@ -171,3 +175,10 @@ def test_twenty_seeds_every_parameter_within_its_covariance() -> None:
     assert s["within_3sigma_all"] >= 0.98 and s["within_3sigma_rig"] >= 0.98
     assert 0.8 <= s["rms_z_all"] <= 1.3 and 0.8 <= s["rms_z_rig"] <= 1.3
     assert min(ratio_all) >= 2.0 and min(ratio_wide) >= 2.0
+    # The reference: the same solves on the true projections + iid noise at each solve's σ,
+    # where the covariance is exact by construction. Even there not every z is within 3 (an
+    # exact covariance puts 0.27 % beyond, ~7 of 2680, in lumps): measured 99.40 %, max |z|
+    # 3.69, RMS z 1.04, d²/P 1.003 (the machinery is right); the rendered corners: 98.69 %,
+    # max |z| 3.45, RMS z 1.18, d²/P 1.136.
+    assert 0.9 <= ref["mean_mahalanobis2_per_parameter"] <= 1.12
+    assert ref["within_3sigma_all"] >= 0.99 and 0.85 <= ref["rms_z_all"] <= 1.1

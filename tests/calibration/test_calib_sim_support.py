@@ -20,6 +20,9 @@ puts this folder on ``sys.path``). What it does:
 - :func:`render_set`, :func:`evaluate_seed`, :func:`z_summary`: render one seed of the
   scenario, calibrate it (``radial-odd`` with the true 4 radial terms; ``opencv5`` beside it)
   and summarise the z-scores over seeds.
+- :func:`iid_reference_views`: the same corners moved to their true projections plus iid
+  Gaussian noise at the solve's own σ — on them the covariance is exact by construction, so
+  their z-scores are the reference for what the rendered ones can reach.
 
 Why not ``features.chessboard.find_chessboard`` directly: its check for a larger board
 (``_extends_beyond``) mistakes the L-junctions where the outer squares meet the white margin
@@ -36,7 +39,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from phonestereo.calibration.bundle import Layout
+from phonestereo.calibration.bundle import Layout, Observations, residuals_and_jacobian
 from phonestereo.calibration.solve import CalibrationOptions, CalibrationResult, calibrate_stereo
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.charts.three_plane import ThreePlaneChart
@@ -208,6 +211,31 @@ def true_parameters(
     return layout.pack((wide, tele), rel, tuple(true_board_poses(views.gt, square_m)))
 
 
+def iid_reference_views(
+    views: SimViews, result: CalibrationResult, truth: np.ndarray, rng: np.random.Generator
+) -> tuple[list[BoardView | None], list[BoardView | None]]:
+    """Wide and tele views with every detected corner replaced by its true projection plus
+    iid N(0, σ²) per coordinate, σ = the solve's RMS per coordinate (the exact-covariance
+    reference on the same geometry: same poses, corners, ids and lens)."""
+    layout = Layout(tuple(c.lens for c in result.cameras), views.sizes, len(views.wide), True)
+    sigma = result.rms_px_per_coordinate
+    out: list[list[BoardView | None]] = [[], []]
+    for cam, seq in enumerate((views.wide, views.tele)):
+        for v, bv in enumerate(seq):
+            if bv is None:
+                out[cam].append(None)
+                continue
+            n = bv.n_points
+            obs = Observations(
+                np.full(n, cam), np.full(n, v), bv.object_points, bv.image_points, bv.ids
+            )
+            r = residuals_and_jacobian(truth, layout, obs, with_jacobian=False)[0]
+            true_px = bv.image_points + r.reshape(-1, 2)  # residual = predicted − observed
+            noisy = true_px + rng.normal(0.0, sigma, true_px.shape)
+            out[cam].append(BoardView(bv.object_points, noisy, bv.ids, bv.name))
+    return out[0], out[1]
+
+
 def z_scores(result: CalibrationResult, truth: np.ndarray) -> np.ndarray:
     """(estimate − truth) / reported σ per parameter."""
     return (result.parameters - truth) / np.sqrt(np.diag(result.covariance))
@@ -244,10 +272,14 @@ def evaluate_views(
 ) -> dict:
     """:func:`evaluate_seed` on views already detected."""
     square = None if config.chart == "three-plane" else config.square_m
-    odd = calibrate_stereo(
-        views.wide, views.tele, views.sizes, CalibrationOptions("radial-odd", n_radial=4)
+    odd_opts = CalibrationOptions("radial-odd", n_radial=4)
+    odd = calibrate_stereo(views.wide, views.tele, views.sizes, odd_opts)
+    truth = true_parameters(odd, views, square)
+    err = odd.parameters - truth
+    ref = calibrate_stereo(
+        *iid_reference_views(views, odd, truth, np.random.default_rng(seed)), views.sizes, odd_opts
     )
-    err = odd.parameters - true_parameters(odd, views, square)
+    err_ref = ref.parameters - truth
     out: dict = {
         "seed": seed,
         "views": [sum(v is not None for v in views.wide), sum(v is not None for v in views.tele)],
@@ -255,6 +287,10 @@ def evaluate_views(
         "z": (err / np.sqrt(np.diag(odd.covariance))).tolist(),
         # Squared Mahalanobis distance / P: χ²_P / P under the covariance, 1 ± √(2/P).
         "mahalanobis2_per_parameter": float(err @ np.linalg.solve(odd.covariance, err)) / err.size,
+        # the same solve on iid-noise corners (exact covariance by construction): the reference
+        "z_iid": (err_ref / np.sqrt(np.diag(ref.covariance))).tolist(),
+        "mahalanobis2_per_parameter_iid": float(err_ref @ np.linalg.solve(ref.covariance, err_ref))
+        / err_ref.size,
         "rms_px_per_point": odd.rms_px_per_point,
         "rms_px_per_coordinate": odd.rms_px_per_coordinate,
         "rms_per_camera": list(odd.rms_per_camera()),
@@ -277,17 +313,17 @@ def evaluate_views(
     return out
 
 
-def z_summary(runs: list[dict]) -> dict[str, float]:
+def z_summary(runs: list[dict], suffix: str = "") -> dict[str, float]:
     """Fraction within 3σ, RMS and max of |z| over all runs: every parameter, and without
     the board poses (cameras + T_tele_wide); and the mean squared Mahalanobis distance per
-    parameter (1 for an exact covariance)."""
-    z = np.concatenate([np.asarray(r["z"]) for r in runs])
+    parameter (1 for an exact covariance). ``suffix="_iid"``: the same of the iid reference."""
+    z = np.concatenate([np.asarray(r["z" + suffix]) for r in runs])
     rig = np.concatenate(
-        [np.asarray(r["z"])[[not n.startswith("view") for n in r["names"]]] for r in runs]
+        [np.asarray(r["z" + suffix])[[not n.startswith("view") for n in r["names"]]] for r in runs]
     )
     out = {
         "mean_mahalanobis2_per_parameter": float(
-            np.mean([r["mahalanobis2_per_parameter"] for r in runs])
+            np.mean([r["mahalanobis2_per_parameter" + suffix] for r in runs])
         )
     }
     for key, v in (("all", z), ("rig", rig)):
