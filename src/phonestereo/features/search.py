@@ -13,15 +13,19 @@ zero-mean NCC) with the right image over disparities ``[min_d, max_d]`` and rows
 
 The loop is over keypoints (not pixels): each search is one OpenCV call writing into one
 (N, rows, disparities) array; the peak, parabola and uniqueness tests are vectorised over it.
+The loops are split over two threads (:func:`~phonestereo.features._threads.run_split`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from phonestereo.features._threads import run_split
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -143,19 +147,24 @@ def ncc_search(
     lo, hi = np.zeros(n, np.int64), np.full(n, nc - 1)
     searched = np.zeros(n, bool)
     ccoeff = cv2.TM_CCOEFF_NORMED
-    for i, (x, y) in enumerate(pts.tolist()):
-        xa, xb = max(x - max_d - r, 0), min(x - min_d + r + 1, w)
-        if xb - xa < 2 * r + 3 or y - ty - r < 0 or y + ty + r + 1 > h:
-            continue
-        off = xa - (x - max_d - r)
-        cols = xb - xa - 2 * r
-        cv2.matchTemplate(
-            right[y - ty - r : y + ty + r + 1, xa:xb],
-            left[y - r : y + r + 1, x - r : x + r + 1],
-            ccoeff,
-            result=cs[i, :, off : off + cols],
-        )
-        lo[i], hi[i], searched[i] = off, off + cols - 1, True
+
+    def forward(chunk: Sequence[int]) -> None:  # writes row i of cs, lo, hi, searched only
+        for i in chunk:
+            x, y = int(pts[i, 0]), int(pts[i, 1])
+            xa, xb = max(x - max_d - r, 0), min(x - min_d + r + 1, w)
+            if xb - xa < 2 * r + 3 or y - ty - r < 0 or y + ty + r + 1 > h:
+                continue
+            off = xa - (x - max_d - r)
+            cols = xb - xa - 2 * r
+            cv2.matchTemplate(
+                right[y - ty - r : y + ty + r + 1, xa:xb],
+                left[y - r : y + r + 1, x - r : x + r + 1],
+                ccoeff,
+                result=cs[i, :, off : off + cols],
+            )
+            lo[i], hi[i], searched[i] = off, off + cols - 1, True
+
+    run_split(forward, range(n))
     k = np.arange(n)
     flat = cs.reshape(n, -1).argmax(axis=1)
     iy, ix = flat // nc, flat % nc
@@ -175,17 +184,21 @@ def ncc_search(
     # with lr_uniqueness = ∞, second ≥ ∞ · score holds only for a negative score (∞ · 0 is NaN)
     unique = best >= 0 if np.isinf(lr_uniqueness) else ~(second >= lr_uniqueness * best)
     lr_run = inner & (best >= lr_min_score) & unique
-    for i in np.flatnonzero(lr_run).tolist():  # the right window back along the left row y
-        x, y = int(pts[i, 0]), int(pts[i, 1])
-        xr, yr = x - max_d + int(ix[i]), y - ty + int(iy[i])
-        la, lb = max(xr + min_d - r, 0), min(xr + max_d + r + 1, w)
-        if lb - la >= 2 * r + 1:
-            back = cv2.matchTemplate(
-                left[y - r : y + r + 1, la:lb],
-                right[yr - r : yr + r + 1, xr - r : xr + r + 1],
-                ccoeff,
-            )
-            lr_ok[i] = abs(la + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
+
+    def backward(chunk: Sequence[int]) -> None:  # the right window back along the left row y
+        for i in chunk:
+            x, y = int(pts[i, 0]), int(pts[i, 1])
+            xr, yr = x - max_d + int(ix[i]), y - ty + int(iy[i])
+            la, lb = max(xr + min_d - r, 0), min(xr + max_d + r + 1, w)
+            if lb - la >= 2 * r + 1:
+                back = cv2.matchTemplate(
+                    left[y - r : y + r + 1, la:lb],
+                    right[yr - r : yr + r + 1, xr - r : xr + r + 1],
+                    ccoeff,
+                )
+                lr_ok[i] = abs(la + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
+
+    run_split(backward, np.flatnonzero(lr_run).tolist())
     return SearchResult(
         searched=searched,
         d0=d0,
