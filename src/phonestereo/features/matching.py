@@ -6,9 +6,12 @@ Stages (each counted in :attr:`MatchResult.counts`):
    (:mod:`~phonestereo.features.keypoints`);
 2. **search** — NCC of the window along the row band ± ``row_tolerance``, the peak's score,
    uniqueness, convexity and left–right consistency (:mod:`~phonestereo.features.search`);
-3. **sub-pixel** — 2-D Lucas–Kanade (d, e, gain, offset, disparity gradient) on a cubic
-   B-spline: no pixel locking (:mod:`~phonestereo.features.subpixel`); it must converge near the
-   NCC peak, fit to within the noise and not be ill-conditioned;
+3. **sub-pixel** — the sharper image is blurred to the other's blur when the NCC matches show a
+   difference that would misfit the windows beyond the noise (:mod:`~phonestereo.features.blur`;
+   a symmetric Gaussian does not move the peak); then 2-D Lucas–Kanade (d, e, gain, offset,
+   disparity gradient) on a cubic B-spline: no pixel locking
+   (:mod:`~phonestereo.features.subpixel`); it must converge near the NCC peak, fit to within
+   the noise and not be ill-conditioned;
 4. **σ** — the Cramér–Rao covariance from the window's gradients and the image noise, raised to
    the window's residual misfit where it fits worse than noise (:mod:`~phonestereo.features.crlb`);
    windows fitting much worse than the typical one, or with σ_d above a bound, are dropped;
@@ -30,6 +33,7 @@ from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
+from phonestereo.features.blur import equalise_pair
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
@@ -150,6 +154,12 @@ def match_rectified(
     idx = np.flatnonzero(_search_tests(s, cfg, counts))
     if not len(idx):
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
+    added, shift_noise = (0.0, 0.0), noise
+    if cfg.equalise_blur:  # after the search: its windows tell the pair's relative blur
+        eq = equalise_pair(
+            lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise, min_misfit=cfg.min_blur_misfit
+        )
+        lc, rc, added, noise, shift_noise = eq.left, eq.right, eq.added, eq.noise, eq.shift_noise
     ref = refine_lk(
         lc,
         None,  # the template gradients are filtered from the left windows directly
@@ -168,10 +178,10 @@ def match_rectified(
     ok &= np.abs(ref.e - s.e0[idx]) <= cfg.max_shift
     counts["subpixel"] = int(ok.sum())
     if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
-        fit = float(np.sqrt(np.median(ref.residual_var[ok] / (1 + ref.gain[ok] ** 2))))
-        noise = (min(noise[0], fit), min(noise[1], fit))
+        k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
+        noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
     sd, se, _ = match_sigma(
-        ref.cov_unit, ref.residual_var, ref.gain, *noise, use_residual=cfg.residual_sigma
+        ref.cov_unit, ref.residual_var, ref.gain, *shift_noise, use_residual=cfg.residual_sigma
     )
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
     with np.errstate(invalid="ignore"):
@@ -198,7 +208,22 @@ def match_rectified(
         roi=roi_t,
         seconds=time.perf_counter() - t0,
         reason=why,
+        blur_added=added,
     )
+
+
+def _noise_cap(noise: tuple[float, float], residual_var: F64, gain: F64) -> float:
+    """Factor ≤ 1 on the image-based noise σ (left, right): the typical window residual bounds it.
+
+    Fine texture inflates :func:`~phonestereo.features.crlb.noise_sigma`; the median residual
+    variance of the window fits, s² ≈ σ_L² + a²·σ_R² (per pixel), bounds it. One factor scales
+    both, so their ratio is kept: after blur equalisation one image's noise is a computed
+    fraction of the other's, and capping each at one common value would under-count the
+    noisier one. For σ_L = σ_R this is the cap min(σ, √median(s² / (1 + a²))) / σ.
+    """
+    model = noise[0] ** 2 + gain**2 * noise[1] ** 2
+    k = float(np.sqrt(np.median(residual_var / model)))
+    return min(k, 1.0) if np.isfinite(k) else 1.0
 
 
 def _keypoints(
