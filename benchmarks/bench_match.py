@@ -236,12 +236,15 @@ def render_pair(
     baseline_m: float = 0.02,
     texel_px: float = 5.0,
     seed: int = 0,
+    blur: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A rectified rendered pair of textured planes and the true left disparity f·B/Z per pixel.
 
     ``planes``: (disparity at the plane centre, tilt rotation vector (rad), centre offset (m));
     blobs are about ``texel_px`` px across at that disparity. Left camera at the origin, right
     camera at +B along x (so d = f·B/Z > 0). 8-bit images with the default sensor noise.
+    ``blur``: Gaussian σ (px) of the left and right optics, applied to the radiance before the
+    sensor (defocus: the noise stays white, as on a phone).
     """
     from phonestereo.charts.texture import TexturedPlane
     from phonestereo.geometry import Camera, Transform
@@ -263,7 +266,11 @@ def render_pair(
     right = render_view(cam, Transform(np.eye(3), np.array([-baseline_m, 0.0, 0.0])), scene)
     rng = np.random.default_rng(seed + 1000)
     d_true = f_px * baseline_m / left.depth_m.astype(np.float64)
-    return capture(left.radiance, rng), capture(right.radiance, rng), d_true
+    rad = [
+        cv2.GaussianBlur(v.radiance, (0, 0), s) if s > 0 else v.radiance
+        for v, s in zip((left, right), blur, strict=True)
+    ]
+    return capture(rad[0], rng), capture(rad[1], rng), d_true
 
 
 def rendered_honesty(seed: int = 0) -> dict[str, Any]:
