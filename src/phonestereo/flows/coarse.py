@@ -94,9 +94,11 @@ def equalise_blur(
         rb = cv2.GaussianBlur(cb, (0, 0), s)
         best = max(best, (zncc(la[ia], cb[ib]), s, 0.0), (zncc(ca[ia], rb[ib]), 0.0, s))
     if best[2] > 0:
-        # The tele is the sharper one: leave the pair as it is. (Blurring the matcher's right
-        # image collapses its sub-pixel stage — measured: 841 → 104 survivors on a chart at
-        # 2 m — while the wide/tele misfit of an unblurred pair only widens σ_d.)
+        # The tele is the sharper one: leave the pair as it is here. The matcher equalises
+        # that case itself (features/blur.py), with the blurred image's noise computed from
+        # the kernel; blurring the right image here, with the noise then re-estimated from
+        # the blurred image (read low), collapsed its sub-pixel stage (841 → 104 survivors
+        # on a chart at 2 m).
         best = (best[0], 0.0, 0.0)
     _, s_l, s_r = best
     if s_l > 0:
