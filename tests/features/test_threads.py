@@ -52,3 +52,26 @@ def test_split_search_works_in_a_forked_child() -> None:
         p.kill()
     assert not alive, "the forked child hung in the split search"
     assert q.get(timeout=5) == pytest.approx(9.0, abs=0.05)
+
+
+@pytest.mark.parametrize("threads", ["", "1"])
+def test_background_returns_the_value_or_raises(
+    monkeypatch: pytest.MonkeyPatch, threads: str
+) -> None:
+    monkeypatch.setenv("PHONESTEREO_THREADS", threads)
+    assert _threads.background(np.add, 2, 3).result() == 5
+    fut = _threads.background(np.linalg.inv, np.zeros((2, 2)))
+    with pytest.raises(np.linalg.LinAlgError):
+        fut.result()
+
+
+def test_matcher_result_does_not_depend_on_the_threads(monkeypatch: pytest.MonkeyPatch) -> None:
+    from phonestereo.features.matching import match_rectified
+
+    left, right, _ = _pair(1)
+    two = match_rectified(left, right, max_disparity=24)
+    monkeypatch.setenv("PHONESTEREO_THREADS", "1")
+    one = match_rectified(left, right, max_disparity=24)
+    assert len(two) == len(one) > 100
+    for name in ("xy", "d", "e", "sigma_d"):
+        np.testing.assert_array_equal(getattr(two, name), getattr(one, name))

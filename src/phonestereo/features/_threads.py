@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any, TypeVar
 
-__all__ = ["run_split", "split_enabled"]
+__all__ = ["background", "run_split", "split_enabled"]
 
 T = TypeVar("T")
 
@@ -60,3 +60,19 @@ def run_split(fn: Callable[[Sequence[T]], None], items: Sequence[T]) -> None:
         fn(items[:half])
     finally:
         other.result()
+
+
+def background(fn: Callable[..., T], *args: Any) -> Future[T]:
+    """``fn(*args)`` started on the helper thread (or run here, done, when the split is off).
+
+    For independent work on the other image of a pair while this thread does its own; take
+    the value with ``.result()`` (which raises what ``fn`` raised).
+    """
+    if split_enabled():
+        return _executor().submit(fn, *args)
+    done: Future[T] = Future()
+    try:
+        done.set_result(fn(*args))
+    except Exception as exc:  # handed to .result(), as the executor does
+        done.set_exception(exc)
+    return done

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
+from phonestereo.features._threads import background
 from phonestereo.features.blur import equalise_pair
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
@@ -41,6 +42,7 @@ from phonestereo.features.match_input import as_image, check_pair, crop_box, par
 from phonestereo.features.search import SearchResult, ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 
+F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
@@ -122,10 +124,13 @@ def match_rectified(
     ox, oy, cx1, cy1 = crop_box(roi_t, (w, h), dmin, dmax, guard + PREFILTER_MARGIN)
     lc = np.ascontiguousarray(lf[oy:cy1, ox:cx1], dtype=np.float32)
     rc = np.ascontiguousarray(rt[oy:cy1, ox:cx1], dtype=np.float32)
+    # the right image's noise and spline prefilter on the other core while the left's
+    # keypoints are found (the prefilter is dropped if blur equalisation changes the image)
+    right_prep = background(_right_preparation, rc, cfg.noise_sigma is None)
     if cfg.noise_sigma is not None:
         noise = (float(cfg.noise_sigma), float(cfg.noise_sigma))
     else:
-        noise = (noise_sigma(lc), noise_sigma(rc))
+        noise = (noise_sigma(lc), right_prep.result()[0])
     box = (
         max(rx, guard) - ox,
         max(ry, guard) - oy,
@@ -163,7 +168,7 @@ def match_rectified(
     ref = refine_lk(
         lc,
         None,  # the template gradients are filtered from the left windows directly
-        bspline_coefficients(rc),
+        right_prep.result()[1] if added[1] == 0 else bspline_coefficients(rc),
         xy[idx],
         s.d0[idx],
         s.e0[idx],
@@ -210,6 +215,12 @@ def match_rectified(
         reason=why,
         blur_added=added,
     )
+
+
+def _right_preparation(right: F32, with_noise: bool) -> tuple[float, F32]:
+    """The right image's noise σ (NaN unless ``with_noise``) and its B-spline coefficients."""
+    noise = noise_sigma(right) if with_noise else float("nan")
+    return noise, bspline_coefficients(right)
 
 
 def _noise_cap(noise: tuple[float, float], residual_var: F64, gain: F64) -> float:
