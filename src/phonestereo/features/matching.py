@@ -127,17 +127,16 @@ def match_rectified(
     # the right image's noise and spline prefilter on the other core while the left's
     # keypoints are found (the prefilter is dropped if blur equalisation changes the image)
     right_prep = background(_right_preparation, rc, cfg.noise_sigma is None)
-    if cfg.noise_sigma is not None:
-        noise = (float(cfg.noise_sigma), float(cfg.noise_sigma))
-    else:
-        noise = (noise_sigma(lc), right_prep.result()[0])
+    given = cfg.noise_sigma
+    noise_l = float(given) if given is not None else noise_sigma(lc)
     box = (
         max(rx, guard) - ox,
         max(ry, guard) - oy,
         min(rx + rw, w - guard) - ox,
         min(ry + rh, h - guard) - oy,
     )
-    xy = _keypoints(lc, box, noise[0], cfg)
+    xy = _keypoints(lc, box, noise_l, cfg)
+    noise = (noise_l, noise_l if given is not None else right_prep.result()[0])
     counts = {"keypoints": len(xy)}
     if not len(xy):
         why = "no keypoints: the ROI has no texture above the noise"
