@@ -44,9 +44,7 @@ def gaussian_kernel(sigma: float) -> F64:
     (7, 1.0)
     """
     half = max(1, int(np.ceil(4.0 * float(sigma))))
-    u = np.arange(-half, half + 1, dtype=np.float64)
-    k = np.exp(-0.5 * (u / float(sigma)) ** 2)
-    return k / k.sum()
+    return np.asarray(cv2.getGaussianKernel(2 * half + 1, float(sigma), cv2.CV_64F)).ravel()
 
 
 def gaussian_blur(image: F32, sigma: float) -> tuple[F32, float]:
@@ -361,14 +359,13 @@ def equalise_pair(
     s = abs(est.sigma)
     if not (est.misfit_ratio >= min_misfit and s > 0):
         return EqualisedPair(left, right, (0.0, 0.0), noise, noise, est)
-    if est.sigma < 0:
-        out, g = gaussian_blur(left, s)
-        a = float(np.sqrt(est.shift_noise_factor))
-        return EqualisedPair(
-            out, right, (s, 0.0), (noise[0] * g, noise[1]), (noise[0] * a, noise[1]), est
-        )
-    out, g = gaussian_blur(right, s)
-    a = float(np.sqrt(est.shift_noise_factor))
+    side = 0 if est.sigma < 0 else 1  # the sharper image: 0 left, 1 right
+    images, added = [left, right], [0.0, 0.0]
+    pixel, shift = list(noise), list(noise)
+    images[side], g = gaussian_blur(images[side], s)
+    added[side] = s
+    pixel[side] *= g
+    shift[side] *= float(np.sqrt(est.shift_noise_factor))
     return EqualisedPair(
-        left, out, (0.0, s), (noise[0], noise[1] * g), (noise[0], noise[1] * a), est
+        images[0], images[1], (added[0], added[1]), (pixel[0], pixel[1]), (shift[0], shift[1]), est
     )
