@@ -107,6 +107,14 @@ def test_stereo_recovers_truth_within_its_covariance(seed: int) -> None:
     # The fitted noise equals the injected one (per coordinate), within 5 %.
     assert res.rms_px_per_coordinate == pytest.approx(sigma, rel=0.05)
     assert np.linalg.norm(res.T_tele_wide.t - rel.t) < 2e-4  # metres, i.e. 0.2 mm of 12 mm
+    # The baseline's σ: first-order propagation equals the spread of |t| over draws from the
+    # covariance (σ_t / |t| ~ 1e-3, so the norm is linear to ~1e-6); 20 000 draws → ±1 %.
+    norm, sd = res.baseline()
+    idx = [res.parameter_names.index(f"T_tele_wide.t{a}") for a in "xyz"]
+    draws = rng.multivariate_normal(res.T_tele_wide.t, res.covariance[np.ix_(idx, idx)], 20_000)
+    assert norm == pytest.approx(np.linalg.norm(res.T_tele_wide.t))
+    assert sd == pytest.approx(np.std(np.linalg.norm(draws, axis=1)), rel=0.03)
+    assert abs(norm - np.linalg.norm(rel.t)) < 4.5 * sd
 
 
 def test_trimmed_noise_variance_is_unbiased_for_gaussian_residuals() -> None:
@@ -197,3 +205,13 @@ def test_too_few_views_is_a_clear_error() -> None:
         calibrate_camera(views, wide.size)
     with pytest.raises(InputError, match="no board views"):
         calibrate_camera([], wide.size)
+
+
+def test_mono_result_has_no_baseline() -> None:
+    rng = np.random.default_rng(1)
+    wide, _, _ = _true_rig()
+    obj = chessboard_object_points((8, 6), 0.02)
+    views = [v for v in _views(wide, _board_poses(rng, 6, 0.5), obj, rng, 0.1) if v is not None]
+    res = calibrate_camera(views, wide.size)
+    with pytest.raises(InputError, match="--tele"):
+        res.baseline()

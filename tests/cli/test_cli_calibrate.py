@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -42,6 +43,9 @@ def test_stereo_calibration_json(tmp_path: Path) -> None:
     assert summary["rms_px_per_coordinate"] <= 0.14
     assert summary["outliers"] / summary["points"] < 0.03
     assert abs(abs(summary["T_tele_wide"]["t"][0]) - 3.33) < 0.05  # square units
+    # |t| with its σ (first order): the sample's 3.33 squares, known to ~1e-3 of a square.
+    assert summary["baseline"]["norm"] == pytest.approx(np.linalg.norm(summary["T_tele_wide"]["t"]))
+    assert 1e-4 < summary["baseline"]["std"] < 0.01
     saved = json.loads((tmp_path / "calibration.json").read_text())
     assert saved["rms_px"] == pytest.approx(summary["rms_px_per_point"])
 

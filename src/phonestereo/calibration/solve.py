@@ -112,6 +112,20 @@ class CalibrationResult:
         sd = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
         return dict(zip(self.parameter_names, sd.tolist(), strict=True))
 
+    def baseline(self) -> tuple[float, float]:
+        """|t| of ``T_tele_wide`` and its standard deviation (first-order, from the covariance).
+
+        In the unit of the board's square (metres when ``square_m`` was in metres); σ² = uᵀ C u,
+        u = t / |t|, C the 3 × 3 covariance block of (tx, ty, tz).
+        """
+        if self.T_tele_wide is None:
+            raise InputError("a mono calibration has no baseline; calibrate with --tele")
+        t = np.asarray(self.T_tele_wide.t, dtype=np.float64)
+        idx = [self.parameter_names.index(f"T_tele_wide.t{a}") for a in "xyz"]
+        u = t / np.linalg.norm(t)
+        var = float(u @ self.covariance[np.ix_(idx, idx)] @ u)
+        return float(np.linalg.norm(t)), float(np.sqrt(max(var, 0.0)))
+
     def rms_per_camera(self) -> tuple[float, ...]:
         """RMS per point of each camera over its inliers."""
         out = []

@@ -114,6 +114,9 @@ def calibrate(
         "cameras": [c.to_dict() for c in result.cameras],
         "T_tele_wide": result.T_tele_wide.to_dict() if result.T_tele_wide else None,
         "std": {n: result.std[n] for n in names},
+        "baseline": None
+        if result.T_tele_wide is None
+        else dict(zip(("norm", "std"), result.baseline(), strict=True)),
         "out": str(out),
         "plots": plot_paths,
     }
@@ -133,7 +136,10 @@ def calibrate(
         table.add_row(f"{who} f", f"{cam.fx:.2f}, {cam.fy:.2f} ± {sd[f'{who}.fx']:.2f} px")
         table.add_row(f"{who} c", f"{cam.cx:.2f}, {cam.cy:.2f} ± {sd[f'{who}.cx']:.2f} px")
     if result.T_tele_wide is not None:
-        table.add_row("baseline |t|", f"{result.T_tele_wide.t.tolist()}")
+        norm, sd_norm = result.baseline()
+        t = ", ".join(f"{v:+.4f}" for v in result.T_tele_wide.t)
+        table.add_row("baseline |t|", f"{norm:.4f} ± {sd_norm:.4f} (unit of --square-m)")
+        table.add_row("t (tele ← wide)", f"({t})")
     table.add_row("solve time", f"{result.seconds:.2f} s")
     for path in plot_paths:
         table.add_row("residual plot", path)
