@@ -16,13 +16,19 @@ hold literally: with 134 parameters per seed a Gaussian puts 0.27 % of them beyo
   and RMS z ≤ 1.3 — looser than an exact covariance gives (99.7 %, 1.0) because z of one
   seed are strongly correlated (its 18 board poses share a few modes), so they come in lumps.
 
-Measured (see the report; 20 seeds): d²/P 1.136, 98.69 % within 3σ, RMS z 1.18, max |z| 3.45.
-The iid reference on the same geometry (true projections + iid noise at each solve's σ, so the
-covariance is exact by construction) gives 1.003, 99.40 %, 1.04 and 3.69: "every z within 3"
-is out of reach of any exact covariance. Ours is ~6 % optimistic in σ, in the weak modes (focal
-length vs board distance, principal point, tele radial terms), because rendered corner errors
-are not iid Gaussian: a deterministic part (quantisation, aliasing; 0.0035 px RMS, 15 % of the
-error variance, measured on noise-free renders of the same seeds) and slightly heavy tails.
+Measured (``benchmarks/bench_calibrate_sim.py``, 20 seeds): d²/P 1.136, 98.69 % within 3σ,
+RMS z 1.18, max |z| 3.45. The iid reference on the same geometry (true projections + iid noise
+at each solve's σ, so the covariance is exact by construction), over 8 draws of its noise:
+d²/P 0.97–1.08, 98.40–99.96 % within 3σ, RMS z 0.92–1.11, max |z| 3.13–3.79; "every z within
+3" held in 0 of the 8 draws (2 of 8 on the 26 camera + rig parameters alone), so the literal
+wording is out of reach of any exact covariance. Ours is inside that range on the fraction
+within 3σ and on max |z|, above it on d²/P and RMS z: ~6 % optimistic in σ, in the weak modes
+(focal length vs board distance, principal point, tele radial terms). Rendered corner errors
+are not iid: a deterministic part (quantisation, aliasing; 0.0035 px RMS, 15 % of the error
+variance, on noise-free renders of the same seeds), tele corners ~25 % noisier in variance than
+wide ones, slightly heavy tails. Tried and not kept (d²/P still above the draws' range, the
+other figures no better): a σ per camera in weights, threshold and covariance (1.107), a σ per
+view (1.125), a σ per camera with rejection at the χ²₂ 99.9 / 99.99 % quantile (1.099 / 1.085).
 """
 
 from __future__ import annotations
@@ -121,9 +127,12 @@ def test_bad_calibration_configs() -> None:
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_boards_recover_truth_within_covariance(seed: int) -> None:
-    run = evaluate_seed(seed, FAST)
+    run = evaluate_seed(seed, FAST, iid_reps=2)
     assert run["views"][0] == 12 and run["views"][1] >= 3  # every planned board found
     s = z_summary([run])
+    # The iid reference's further draw: fresh noise on the same geometry, same guard as below.
+    assert run["z_iid_1"] != run["z_iid"] and len(run["z_iid_1"]) == len(run["z"])
+    assert z_summary([run], "_iid_1")["max_abs_z_all"] < 5.0
     print(json.dumps({k: v for k, v in run.items() if k not in ("z", "names")}), s)
     # Rendered corners: ~0.012 px noise + ~0.005 px deterministic error per point.
     assert run["rms_px_per_point"] < 0.02

@@ -254,7 +254,9 @@ def _rms_pt(res: CalibrationResult, camera: int | None = None) -> float:
     return float(np.sqrt(np.mean(np.sum(r**2, axis=1))))
 
 
-def evaluate_seed(seed: int, config: CalibrationConfig, *, compare_even: bool = True) -> dict:
+def evaluate_seed(
+    seed: int, config: CalibrationConfig, *, compare_even: bool = True, iid_reps: int = 1
+) -> dict:
     """Render, detect and calibrate one seed; z-scores against truth and the RMS figures.
 
     Returns a JSON-ready dict: ``z`` and ``names`` (every parameter of the ``radial-odd``
@@ -264,13 +266,22 @@ def evaluate_seed(seed: int, config: CalibrationConfig, *, compare_even: bool = 
     """
     with tempfile.TemporaryDirectory() as tmp:
         views = render_set(Path(tmp), seed, config)
-    return evaluate_views(views, seed, config, compare_even=compare_even)
+    return evaluate_views(views, seed, config, compare_even=compare_even, iid_reps=iid_reps)
 
 
 def evaluate_views(
-    views: SimViews, seed: int, config: CalibrationConfig, *, compare_even: bool = True
+    views: SimViews,
+    seed: int,
+    config: CalibrationConfig,
+    *,
+    compare_even: bool = True,
+    iid_reps: int = 1,
 ) -> dict:
-    """:func:`evaluate_seed` on views already detected."""
+    """:func:`evaluate_seed` on views already detected.
+
+    ``iid_reps`` > 1 adds ``z_iid_<k>`` and ``mahalanobis2_per_parameter_iid_<k>`` for
+    k = 1 … iid_reps − 1: further draws of the iid reference (fresh noise, same geometry and
+    σ), for the spread of every figure under an exact covariance."""
     square = None if config.chart == "three-plane" else config.square_m
     odd_opts = CalibrationOptions("radial-odd", n_radial=4)
     odd = calibrate_stereo(views.wide, views.tele, views.sizes, odd_opts)
@@ -291,6 +302,7 @@ def evaluate_views(
         "z_iid": (err_ref / np.sqrt(np.diag(ref.covariance))).tolist(),
         "mahalanobis2_per_parameter_iid": float(err_ref @ np.linalg.solve(ref.covariance, err_ref))
         / err_ref.size,
+        **_iid_draws(views, odd, truth, odd_opts, seed, iid_reps),
         "rms_px_per_point": odd.rms_px_per_point,
         "rms_px_per_coordinate": odd.rms_px_per_coordinate,
         "rms_per_camera": list(odd.rms_per_camera()),
@@ -313,10 +325,32 @@ def evaluate_views(
     return out
 
 
+def _iid_draws(
+    views: SimViews,
+    odd: CalibrationResult,
+    truth: np.ndarray,
+    opts: CalibrationOptions,
+    seed: int,
+    reps: int,
+) -> dict:
+    """Draws 1 … reps − 1 of the iid reference (draw 0 is ``z_iid``), keyed ``…_iid_<k>``."""
+    out: dict = {}
+    for k in range(1, reps):
+        rng = np.random.default_rng([seed, k])
+        ref = calibrate_stereo(*iid_reference_views(views, odd, truth, rng), views.sizes, opts)
+        err = ref.parameters - truth
+        out[f"z_iid_{k}"] = (err / np.sqrt(np.diag(ref.covariance))).tolist()
+        out[f"mahalanobis2_per_parameter_iid_{k}"] = (
+            float(err @ np.linalg.solve(ref.covariance, err)) / err.size
+        )
+    return out
+
+
 def z_summary(runs: list[dict], suffix: str = "") -> dict[str, float]:
     """Fraction within 3σ, RMS and max of |z| over all runs: every parameter, and without
     the board poses (cameras + T_tele_wide); and the mean squared Mahalanobis distance per
-    parameter (1 for an exact covariance). ``suffix="_iid"``: the same of the iid reference."""
+    parameter (1 for an exact covariance). ``suffix="_iid"``: the same of the iid reference
+    (``"_iid_<k>"``: its further draws, see :func:`evaluate_views`)."""
     z = np.concatenate([np.asarray(r["z" + suffix]) for r in runs])
     rig = np.concatenate(
         [np.asarray(r["z" + suffix])[[not n.startswith("view") for n in r["names"]]] for r in runs]
