@@ -19,7 +19,7 @@ corners are detected in the PNGs (OpenCV order + saddle refinement), and:
 
 Usage: ``.venv/bin/python benchmarks/bench_calibrate_sim.py [--seeds 20] [--jobs 2] [--iid-reps 8]
 [--json]``
-(20 seeds: ~10 min on 2 cores; ``--seeds 2`` for a look).
+(20 seeds with 8 iid draws: ~4 min on 2 cores; ``--seeds 2`` for a look).
 """
 
 from __future__ import annotations
