@@ -40,7 +40,8 @@ import cv2
 import numpy as np
 
 from phonestereo.calibration.bundle import Layout, Observations, residuals_and_jacobian
-from phonestereo.calibration.solve import CalibrationOptions, CalibrationResult, calibrate_stereo
+from phonestereo.calibration.result import CalibrationResult
+from phonestereo.calibration.solve import CalibrationOptions, calibrate_stereo
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.charts.three_plane import ThreePlaneChart
 from phonestereo.features.saddle import refine_saddle

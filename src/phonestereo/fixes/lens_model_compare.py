@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phonestereo.calibration.solve import CalibrationOptions, CalibrationResult, calibrate_camera
+from phonestereo.calibration.result import CalibrationResult
+from phonestereo.calibration.solve import CalibrationOptions, calibrate_camera
 from phonestereo.calibration.views import BoardView
 from phonestereo.fixes.distortion import radial_geometry
 from phonestereo.geometry import Camera

@@ -24,7 +24,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from phonestereo.calibration.solve import CalibrationResult
+from phonestereo.calibration.result import CalibrationResult
 from phonestereo.errors import InputError
 
 INLIER_COLOR = "tab:blue"
