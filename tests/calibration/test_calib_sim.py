@@ -28,7 +28,9 @@ are not iid: a deterministic part (quantisation, aliasing; 0.0035 px RMS, 15 % o
 variance, on noise-free renders of the same seeds), tele corners ~25 % noisier in variance than
 wide ones, slightly heavy tails. Tried and not kept (d²/P still above the draws' range, the
 other figures no better): a σ per camera in weights, threshold and covariance (1.107), a σ per
-view (1.125), a σ per camera with rejection at the χ²₂ 99.9 / 99.99 % quantile (1.099 / 1.085).
+view (1.125), a σ per camera with rejection at the χ²₂ 99.9 / 99.99 % quantile (1.099 / 1.085),
+and weights from each corner's predicted covariance (the sensor's noise map, known here from
+the noise-free render, through the saddle fit's Hessian: 1.087) — the best, still not enough.
 """
 
 from __future__ import annotations
