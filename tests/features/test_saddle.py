@@ -12,6 +12,7 @@ import pytest
 from phonestereo.calibration.solve import CalibrationOptions, calibrate_stereo
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.errors import ShapeError
+from phonestereo.features.noise_level import NoiseLevel
 from phonestereo.features.saddle import refine_saddle
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "opencv_stereo"
@@ -104,3 +105,52 @@ def test_saddle_corners_calibrate_better_than_cornersubpix() -> None:
     # mrcal reaches 0.129 px per coordinate rejecting 2.4 %; measured here 0.121 px with 1.4 %.
     assert robust.rms_px_per_coordinate < 0.125
     assert robust.n_outliers / robust.inliers.size < 0.024
+
+
+@pytest.mark.parametrize(
+    ("angle", "radius", "blur"), [(0.0, 5.0, 1.5), (0.3, 5.0, 1.5), (0.7, 7.0, 1.0)]
+)
+def test_predicted_covariance_matches_the_scatter_over_noise(
+    angle: float, radius: float, blur: float
+) -> None:
+    """The first-order covariance against 200 noise draws (σ = 2 DN) of the same board.
+
+    200 draws give each corner's σ to ±5 %, the mean over its ~16 corners to ±1.5 %; the
+    noise itself is estimated from each image (estimate_noise_level, ±3 % here).
+    """
+    img, corners = _render_board(np.array([0.3, -0.2]), angle, 20.0 if angle > 0.5 else 16.0)
+    corners = corners[np.all(np.abs(corners - 47.5) < 30, axis=1)]
+    rng = np.random.default_rng(5)
+    pts, cov, noise = [], [], []
+    for _ in range(200):
+        noisy = img + rng.normal(0.0, 2.0, img.shape).astype(np.float32)
+        start = corners + rng.normal(0.0, 0.3, corners.shape)
+        res = refine_saddle(noisy, start, radius_px=radius, blur_sigma_px=blur)
+        assert res.ok.all()
+        pts.append(res.points)
+        cov.append(res.covariance_px2)
+        noise.append(np.sqrt(res.noise.variance(125.0)))
+    ratio = np.std(pts, axis=0) / np.sqrt(np.diagonal(np.mean(cov, axis=0), axis1=1, axis2=2))
+    assert np.mean(noise) == pytest.approx(2.0, rel=0.05)
+    assert 0.9 < ratio.mean() < 1.1, ratio.mean(axis=0)
+    assert 0.75 < ratio.min() and ratio.max() < 1.25, (ratio.min(), ratio.max())
+
+
+def test_covariance_of_a_prefiltered_image_is_the_same() -> None:
+    """Blurring first (as the verification-chart detector does) and saying so gives the same
+    covariance as letting refine_saddle blur."""
+    img, corners = _render_board(np.array([0.1, 0.4]), 0.3, 16.0)
+    corners = corners[np.all(np.abs(corners - 47.5) < 30, axis=1)]
+    noisy = img + np.random.default_rng(2).normal(0.0, 2.0, img.shape).astype(np.float32)
+    level = NoiseLevel(4.0, 0.0)
+    own = refine_saddle(noisy, corners, radius_px=5.0, blur_sigma_px=1.5, noise=level)
+    pre = refine_saddle(
+        cv2.GaussianBlur(noisy, (0, 0), 1.5),
+        corners,
+        radius_px=5.0,
+        blur_sigma_px=0.0,
+        noise=level,
+        prefilter_sigma_px=1.5,
+    )
+    assert np.allclose(pre.points, own.points, atol=1e-9)
+    assert np.allclose(pre.covariance_px2, own.covariance_px2, rtol=1e-6)

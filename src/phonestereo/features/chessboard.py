@@ -29,6 +29,8 @@ class ChessboardDetection:
     ids : ndarray of int, shape (N,)
     quality : ndarray, shape (N,)
         Saddle strength per corner (intensity / px²).
+    sigma_px : ndarray, shape (N,)
+        Predicted position σ per coordinate from the image noise (``SaddleCorners.sigma_px``).
     """
 
     found: bool
@@ -36,6 +38,7 @@ class ChessboardDetection:
     points: np.ndarray
     ids: np.ndarray
     quality: np.ndarray
+    sigma_px: np.ndarray
 
 
 def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDetection:
@@ -66,6 +69,7 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
             empty,
             np.zeros(0, np.int64),
             np.zeros(0),
+            np.zeros(0),
         )
     start = corners.reshape(-1, 2).astype(np.float64)
     # Window: 0.35 of the smallest corner spacing keeps neighbours out of the fit.
@@ -85,6 +89,7 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
             res.points,
             np.arange(cols * rows),
             res.saddle_strength,
+            res.sigma_px,
         )
     keep = res.ok
     bad = int(np.count_nonzero(~keep))
@@ -96,9 +101,12 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
             res.points,
             ids,
             res.saddle_strength,
+            res.sigma_px,
         )
     note = f"{bad} corner(s) dropped: not clean saddles" if bad else ""
-    return ChessboardDetection(True, note, res.points[keep], ids[keep], res.saddle_strength[keep])
+    return ChessboardDetection(
+        True, note, res.points[keep], ids[keep], res.saddle_strength[keep], res.sigma_px[keep]
+    )
 
 
 def _extends_beyond(

@@ -57,6 +57,7 @@ from phonestereo.features.lattice import (
     square_size,
     subpix,
 )
+from phonestereo.features.noise_level import estimate_noise_level
 from phonestereo.features.saddle import refine_saddle
 
 MIN_CORNERS = 12
@@ -99,6 +100,9 @@ class ChartDetection:
         Distance of each corner from the quadratic fitted to its 5 × 5 neighbourhood, pixels
         (noise level ~0.01–0.05 px; corners above 0.15 px are dropped); NaN where the
         neighbourhood is too small (chart border, image edge).
+    sigma_px : ndarray, shape (N,)
+        Predicted position σ per coordinate from the image noise, pixels
+        (``features.saddle.position_covariance``).
     """
 
     found: bool
@@ -112,10 +116,14 @@ class ChartDetection:
     seconds: dict[str, float] = field(default_factory=dict)
     circles: dict[str, F64] = field(default_factory=dict)
     residual_px: F64 = field(default_factory=lambda: np.zeros(0))
+    sigma_px: F64 = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly summary with every corner (row, col, x, y, quality, residual_px)."""
-        res = self.residual_px if len(self.residual_px) else np.full(len(self.ids), np.nan)
+        """JSON-friendly summary with every corner (row, col, x, y, quality, residual_px,
+        sigma_px)."""
+        nan = np.full(len(self.ids), np.nan)
+        res = self.residual_px if len(self.residual_px) else nan
+        sig = self.sigma_px if len(self.sigma_px) else nan
         corners = [
             {
                 "row": int(r),
@@ -124,8 +132,11 @@ class ChartDetection:
                 "y": float(y),
                 "quality": float(q),
                 "residual_px": round(float(e), 4) if np.isfinite(e) else None,
+                "sigma_px": round(float(sd), 5) if np.isfinite(sd) else None,
             }
-            for (r, c), (x, y), q, e in zip(self.ids, self.points, self.quality, res, strict=True)
+            for (r, c), (x, y), q, e, sd in zip(
+                self.ids, self.points, self.quality, res, sig, strict=True
+            )
         ]
         rot = None if not np.isfinite(self.rotation_deg) else round(self.rotation_deg, 3)
         return {
@@ -159,16 +170,18 @@ def _circle_levels(pyr: list[F32], sigma: float, stages: dict[str, Any]) -> Iter
 
 def _refine(
     img: F32, pts: F64, size_px: F64, near_circle: NDArray[np.bool_]
-) -> tuple[F64, F64, NDArray[np.bool_]]:
+) -> tuple[F64, F64, NDArray[np.bool_], F64]:
     """refine_saddle with a window of 0.32 of the local square size (2–``_R_MAX`` px, 0.5 px
     steps) and pre-blur radius / 3 (≤ 1.5 px); next to a circle 0.25 and radius / 4, which
     keeps the blurred circle out of the fit (bias ≤ 0.03 px instead of ≤ 0.1 px on 12 px
-    squares). The image is blurred once per σ, not once per call."""
+    squares). The image is blurred once per σ, not once per call. Returns points, strength,
+    ok and each corner's predicted σ (px per coordinate)."""
     frac = np.where(near_circle, 0.25, 0.32)
     radius = np.clip(np.round(frac * size_px * 2) / 2, 2.0, _R_MAX)
     blur = np.round(np.minimum(1.5, radius / np.where(near_circle, 4.0, 3.0)), 2)
-    out, strength = pts.copy(), np.zeros(len(pts))
+    out, strength, sigma = pts.copy(), np.zeros(len(pts)), np.full(len(pts), np.nan)
     ok = np.zeros(len(pts), bool)
+    noise = estimate_noise_level(img)  # of the unblurred image: each blur correlates it
     lo, hi = np.percentile(img[::4, ::4], [1, 99])
     min_strength = 2e-3 * max(float(hi - lo), 1e-12)  # refine_saddle's default, computed once
     for b in np.unique(blur):
@@ -176,10 +189,21 @@ def _refine(
         for r in np.unique(radius[blur == b]):
             m = (radius == r) & (blur == b)
             res = refine_saddle(
-                f, pts[m], radius_px=float(r), blur_sigma_px=0.0, min_strength=min_strength
+                f,
+                pts[m],
+                radius_px=float(r),
+                blur_sigma_px=0.0,
+                min_strength=min_strength,
+                noise=noise,
+                prefilter_sigma_px=float(b),
             )
-            out[m], strength[m], ok[m] = res.points, res.saddle_strength, res.ok
-    return out, strength, ok
+            out[m], strength[m], ok[m], sigma[m] = (
+                res.points,
+                res.saddle_strength,
+                res.ok,
+                res.sigma_px,
+            )
+    return out, strength, ok, sigma
 
 
 def _near_circle(chart: VerificationChart, ids: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -338,7 +362,7 @@ def _finish(
     pts0 = lat.points
     for level in range(lat.level - 1, -1, -1):  # down the pyramid, onto each level's junction
         pts0 = subpix(pyr[level], 2.0 * pts0 + 0.5, size0 / 2.0**level)[0]
-    pts, strength, ok = _refine(pyr[0], pts0, size0, _near_circle(chart, ids))
+    pts, strength, ok, sigma = _refine(pyr[0], pts0, size0, _near_circle(chart, ids))
     shift = np.hypot(*(pts - pts0).T)
     ok &= ~bad & (shift > 0) & (shift < 0.3 * size0)  # 0: refine_saddle rejected its step
     stages["dropped_by_saddle"] = int(np.count_nonzero(~ok & ~bad))
@@ -358,6 +382,7 @@ def _finish(
     sec["refine"] = time.perf_counter() - t
     order = np.lexsort((ids[ok, 1], ids[ok, 0]))
     ids, pts, strength = ids[ok][order], pts[ok][order], strength[ok][order]
+    sigma = sigma[ok][order]
     resid = resid[ok][order]
     pts = pts + np.array(origin, dtype=np.float64)
     circ = sq.code == lb.CIRCLE
@@ -382,4 +407,6 @@ def _finish(
     note = (
         f"{dropped} corner(s) dropped (not clean saddles or off the smooth fit)" if dropped else ""
     )
-    return ChartDetection(True, note, ids, pts, strength, pairs, rot, stages, sec, circles, resid)
+    return ChartDetection(
+        True, note, ids, pts, strength, pairs, rot, stages, sec, circles, resid, sigma
+    )
