@@ -46,6 +46,11 @@ def test_stereo_calibration_json(tmp_path: Path) -> None:
     # |t| with its σ (first order): the sample's 3.33 squares, known to ~1e-3 of a square.
     assert summary["baseline"]["norm"] == pytest.approx(np.linalg.norm(summary["T_tele_wide"]["t"]))
     assert 1e-4 < summary["baseline"]["std"] < 0.01
+    # The corner σ the image noise predicts (JPEG, sharp corners: ~0.002 px) is far below the
+    # residual RMS (0.12 px): the sample's misfit is the board and the images, not noise.
+    sig = summary["corner_sigma_px"]
+    assert set(sig) == {"wide", "tele"} and all(1e-4 < v < 0.01 for v in sig.values())
+    assert summary["rms_px_per_coordinate"] > 10 * max(sig.values())
     saved = json.loads((tmp_path / "calibration.json").read_text())
     assert saved["rms_px"] == pytest.approx(summary["rms_px_per_point"])
 

@@ -24,12 +24,18 @@ from phonestereo.io import read_gray
 
 @dataclass(frozen=True)
 class ImageReport:
-    """What detection made of one image."""
+    """What detection made of one image.
+
+    ``corner_sigma_px`` is the median predicted σ of its corners per coordinate, from the
+    image noise (NaN when no board was found); ``camera`` is ``wide`` or ``tele``.
+    """
 
     path: str
     found: bool
     n_corners: int
     reason: str
+    corner_sigma_px: float = float("nan")
+    camera: str = "wide"
 
 
 def parse_board(text: str) -> tuple[int, int]:
@@ -66,6 +72,7 @@ def _detect(
     pattern: tuple[int, int],
     obj: np.ndarray,
     progress: Callable[[str], None] | None,
+    camera: str = "wide",
 ) -> tuple[list[BoardView | None], tuple[int, int], list[ImageReport]]:
     views: list[BoardView | None] = []
     reports = []
@@ -81,7 +88,8 @@ def _detect(
                 "one camera's images must share a size"
             )
         det = find_chessboard(img, pattern)
-        reports.append(ImageReport(str(p), det.found, len(det.ids), det.reason))
+        sd = float(np.median(det.sigma_px)) if det.found else float("nan")
+        reports.append(ImageReport(str(p), det.found, len(det.ids), det.reason, sd, camera))
         views.append(BoardView(obj[det.ids], det.points, det.ids, str(p)) if det.found else None)
         if progress:
             progress(str(p))
@@ -132,7 +140,7 @@ def calibrate_from_images(
             f"{len(wide_paths)} wide vs {len(tele_paths)} tele images; stereo "
             "pairs are matched by sorted file name, so the counts must agree"
         )
-    tv, tsize, treports = _detect(tele_paths, board, obj, progress)
+    tv, tsize, treports = _detect(tele_paths, board, obj, progress, "tele")
     _require_views(treports, name)
     if not any(a is not None and b is not None for a, b in zip(wv, tv, strict=True)):
         raise InputError(

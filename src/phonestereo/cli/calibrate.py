@@ -6,12 +6,13 @@ import json
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from phonestereo.calibration.from_images import calibrate_from_images, parse_board
+from phonestereo.calibration.from_images import ImageReport, calibrate_from_images, parse_board
 from phonestereo.calibration.solve import CalibrationOptions, intrinsic_extrinsic_covariance
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError
@@ -56,7 +57,9 @@ def calibrate(
     Corners: OpenCV's detector orders the board, a saddle-point fit refines every corner.
     Solve: nonlinear least squares with an analytic sparse Jacobian; RMS is reported per point
     (as OpenCV does) and per coordinate (as mrcal does), with outliers and the covariance;
-    ``--plots DIR`` draws the residuals of every camera.
+    ``--plots DIR`` draws the residuals of every camera. "corner σ from image noise" is what
+    the image noise alone predicts per corner coordinate: an RMS per coordinate far above it
+    points at the lens model, the board or the images (blur, rolling shutter), not at noise.
     """
     console = Console(stderr=True)
     if model not in LENS_MODELS:
@@ -114,6 +117,7 @@ def calibrate(
         "cameras": [c.to_dict() for c in result.cameras],
         "T_tele_wide": result.T_tele_wide.to_dict() if result.T_tele_wide else None,
         "std": {n: result.std[n] for n in names},
+        "corner_sigma_px": _corner_sigma(reports),
         "baseline": None
         if result.T_tele_wide is None
         else dict(zip(("norm", "std"), result.baseline(), strict=True)),
@@ -130,6 +134,8 @@ def calibrate(
     table.add_row("RMS per point (OpenCV)", f"{result.rms_px_per_point:.4f} px")
     table.add_row("RMS per coordinate (mrcal)", f"{result.rms_px_per_coordinate:.4f} px")
     table.add_row("outliers", f"{result.n_outliers} of {result.inliers.size}")
+    sig = ", ".join(f"{k} {v:.4f}" for k, v in _corner_sigma(reports).items())
+    table.add_row("corner σ from image noise", f"{sig} px (median)")
     for c, cam in enumerate(result.cameras):
         who = ("wide", "tele")[c] if len(result.cameras) == 2 else "camera"
         sd = result.std
@@ -147,3 +153,15 @@ def calibrate(
     for r in reports:
         if not r.found:
             console.print(f"[yellow]skipped[/yellow] {r.path}: {r.reason}")
+
+
+def _corner_sigma(reports: list[ImageReport]) -> dict[str, float]:
+    """Median predicted corner σ per camera over the images with a board, px per coordinate."""
+    out: dict[str, float] = {}
+    for cam in ("wide", "tele"):
+        vals = [r.corner_sigma_px for r in reports if r.camera == cam and r.found]
+        if vals:
+            out[cam] = float(np.median(vals))
+    if not any(r.camera == "tele" for r in reports) and "wide" in out:
+        out = {"camera": out["wide"]}  # mono: named as in the rest of the table
+    return out
