@@ -51,7 +51,7 @@ def test_quantised_low_noise_is_not_zero() -> None:
     assert 0.5 < sigma < 0.85
 
 
-def test_a_flat_image_falls_back_to_one_sigma() -> None:
+def test_pure_noise_without_a_board() -> None:
     rng = np.random.default_rng(3)
     est = estimate_noise_level(rng.normal(100, 3.0, (64, 64)).astype(np.float32))
     assert np.sqrt(est.variance(100.0)) == pytest.approx(3.0, rel=0.1)

@@ -154,3 +154,11 @@ def test_covariance_of_a_prefiltered_image_is_the_same() -> None:
     )
     assert np.allclose(pre.points, own.points, atol=1e-9)
     assert np.allclose(pre.covariance_px2, own.covariance_px2, rtol=1e-6)
+
+
+def test_covariance_of_a_flat_patch_is_nan_not_an_error() -> None:
+    from phonestereo.features.saddle import position_covariance
+
+    flat = np.full((40, 40), 100.0, np.float32)
+    cov = position_covariance(flat, np.array([[20.0, 20.0], [10.3, 25.7]]), 5.0, 1.5, 4.0)
+    assert cov.shape == (2, 2, 2) and np.isnan(cov).all()

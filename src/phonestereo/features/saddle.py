@@ -158,9 +158,17 @@ def position_covariance(
         step[axis] = eps
         cols.append((_fit(f, centres + step, radius)[:, 3:5] - g0) / eps)
     J = np.stack(cols, axis=2)  # (k, 2, 2): d(d, e)/d(x, y)
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    size = np.max(np.abs(J), axis=(1, 2))
+    at = np.clip(np.round(centres).astype(np.int64), 0, np.array(f.shape[::-1]) - 1)
+    tiny = 1e-6 * (1.0 + np.abs(f[at[:, 1], at[:, 0]]))  # intensity / px²: no junction at all
+    flat = (size <= tiny) | ~(np.abs(det) > 1e-12 * size**2)  # no saddle: no σ
+    J[flat] = np.eye(2)
     Ji = np.linalg.inv(J)
     var = np.broadcast_to(np.asarray(noise_var, dtype=np.float64), (centres.shape[0],))
-    return var[:, None, None] * (Ji @ K @ np.swapaxes(Ji, 1, 2))
+    cov = var[:, None, None] * (Ji @ K @ np.swapaxes(Ji, 1, 2))
+    cov[flat] = np.nan
+    return cov
 
 
 def _fit(f: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
