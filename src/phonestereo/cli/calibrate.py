@@ -106,6 +106,7 @@ def calibrate(
         except InputError as exc:
             console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
             raise typer.Exit(2) from exc
+    corner_sigma = _corner_sigma(reports)
     summary = {
         "rms_px_per_point": result.rms_px_per_point,
         "rms_px_per_coordinate": result.rms_px_per_coordinate,
@@ -117,7 +118,7 @@ def calibrate(
         "cameras": [c.to_dict() for c in result.cameras],
         "T_tele_wide": result.T_tele_wide.to_dict() if result.T_tele_wide else None,
         "std": {n: result.std[n] for n in names},
-        "corner_sigma_px": _corner_sigma(reports),
+        "corner_sigma_px": corner_sigma,
         "baseline": None
         if result.T_tele_wide is None
         else dict(zip(("norm", "std"), result.baseline(), strict=True)),
@@ -134,7 +135,7 @@ def calibrate(
     table.add_row("RMS per point (OpenCV)", f"{result.rms_px_per_point:.4f} px")
     table.add_row("RMS per coordinate (mrcal)", f"{result.rms_px_per_coordinate:.4f} px")
     table.add_row("outliers", f"{result.n_outliers} of {result.inliers.size}")
-    sig = ", ".join(f"{k} {v:.4f}" for k, v in _corner_sigma(reports).items())
+    sig = ", ".join(f"{k} {v:.4f}" for k, v in corner_sigma.items())
     table.add_row("corner σ from image noise", f"{sig} px (median)")
     for c, cam in enumerate(result.cameras):
         who = ("wide", "tele")[c] if len(result.cameras) == 2 else "camera"

@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from phonestereo.errors import InputError
+from phonestereo.features.noise_level import NoiseLevel, estimate_noise_level
 from phonestereo.features.saddle import refine_saddle
 
 
@@ -79,8 +80,12 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
         float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
     )
     radius = float(np.clip(0.35 * spacing, 2.0, 6.0))
-    res = refine_saddle(image, start, radius_px=radius, blur_sigma_px=min(1.5, radius / 3))
-    larger = _extends_beyond(image, res.points.reshape(rows, cols, 2), res.saddle_strength, radius)
+    noise = estimate_noise_level(image)  # once per image, for every refinement below
+    blur = min(1.5, radius / 3)
+    res = refine_saddle(image, start, radius_px=radius, blur_sigma_px=blur, noise=noise)
+    larger = _extends_beyond(
+        image, res.points.reshape(rows, cols, 2), res.saddle_strength, radius, noise
+    )
     if larger:
         return ChessboardDetection(
             False,
@@ -110,7 +115,7 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
 
 
 def _extends_beyond(
-    image: np.ndarray, grid: np.ndarray, strength: np.ndarray, radius: float
+    image: np.ndarray, grid: np.ndarray, strength: np.ndarray, radius: float, noise: NoiseLevel
 ) -> str:
     """Name a side past which the chessboard continues (a sub-board was found), or ''.
 
@@ -134,7 +139,9 @@ def _extends_beyond(
         )
         if inside.sum() < 2:
             continue
-        r = refine_saddle(image, pts[inside], radius_px=radius, blur_sigma_px=min(1.5, radius / 3))
+        r = refine_saddle(
+            image, pts[inside], radius_px=radius, blur_sigma_px=min(1.5, radius / 3), noise=noise
+        )
         # A continuing board has full-strength saddles; where the outer squares meet the white
         # margin the fit still finds weak ones (0.3–0.47 of typical), so the bar is 0.6.
         strong = r.ok & (r.saddle_strength > 0.6 * typical)
