@@ -20,6 +20,7 @@ from phonestereo.geometry import (
     relative_depth_error,
     skew,
 )
+from phonestereo.geometry.transform import ORTHONORMAL_TOLERANCE, orthonormality_error
 
 SETTINGS = settings(derandomize=True, max_examples=100, deadline=None, database=None)
 
@@ -66,6 +67,24 @@ def test_transform_rejects_non_rotations_and_bad_shapes() -> None:
     T = Transform.identity()
     with pytest.raises(ValueError, match="read-only"):
         T.R[0, 0] = 2.0  # getters never leak writable arrays
+
+
+def test_transform_snaps_rotations_printed_with_few_digits() -> None:
+    # ../shared/data/phone_wide_ultra/extrinsics.yml prints R with 8 decimals: orthonormal only
+    # to ~6.5e-9, which a real file must still load; the stored R is the nearest rotation.
+    r = np.array(
+        [
+            [0.99997791, 0.00637036, 0.0018983],
+            [-0.00638274, 0.99995793, 0.0065878],
+            [-0.00185626, -0.00659977, 0.9999765],
+        ]
+    )
+    assert 1e-9 < orthonormality_error(r) < ORTHONORMAL_TOLERANCE
+    T = Transform(r, np.zeros(3))
+    assert orthonormality_error(T.R) < 1e-14  # float64 rounding of U·Vᵀ
+    np.testing.assert_allclose(T.R, r, atol=1e-8)  # moved by less than the printed digits
+    with pytest.raises(InputError, match="6 significant digits"):
+        Transform(np.round(r, 4), np.zeros(3))  # 4 decimals: ~1e-4 off, not a rotation
 
 
 def test_typed_errors() -> None:

@@ -14,10 +14,38 @@ from scipy.spatial.transform import Rotation
 from phonestereo.errors import InputError
 from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen
 
+ORTHONORMAL_TOLERANCE = 1e-6
+"""Largest max |R·Rᵀ − I| accepted: real files print R with 6–9 significant digits."""
+
+
+def orthonormality_error(r: Array) -> float:
+    """max |R·Rᵀ − I| of a 3×3 matrix (0 for an exact rotation).
+
+    >>> orthonormality_error(np.eye(3))
+    0.0
+    """
+    m = np.asarray(r, dtype=np.float64)
+    return float(np.abs(m @ m.T - np.eye(3)).max())
+
+
+def nearest_rotation(r: Array) -> Array:
+    """The rotation closest to ``r`` in the Frobenius norm (SVD: U·Vᵀ, det forced to +1).
+
+    >>> r = np.round(Rotation.from_rotvec([0.01, 0.02, 0.3]).as_matrix(), 6)
+    >>> orthonormality_error(r) > 1e-8, orthonormality_error(nearest_rotation(r)) < 1e-14
+    (True, True)
+    """
+    u, _, vt = np.linalg.svd(np.asarray(r, dtype=np.float64))
+    d = np.sign(np.linalg.det(u @ vt))
+    return np.asarray(u @ np.diag([1.0, 1.0, d]) @ vt, dtype=np.float64)
+
 
 @dataclass(frozen=True, eq=False)
 class Transform:
     """A rigid transform: rotation R (3, 3) and translation t (3,) in metres.
+
+    An R orthonormal to within :data:`ORTHONORMAL_TOLERANCE` (a file's 6–9 printed digits) is
+    replaced by the nearest rotation (:func:`nearest_rotation`); a larger deviation is an error.
 
     Examples
     --------
@@ -32,8 +60,15 @@ class Transform:
     def __post_init__(self) -> None:
         r = as_matrix(self.R, (3, 3), "R")
         t = as_matrix(np.ravel(np.asarray(self.t, dtype=float)), (3,), "t")
-        if not np.allclose(r @ r.T, np.eye(3), atol=1e-9) or np.linalg.det(r) < 0:
-            raise InputError("R must be a rotation matrix (orthonormal, det = +1)")
+        dev = orthonormality_error(r)
+        if not dev <= ORTHONORMAL_TOLERANCE or np.linalg.det(r) < 0:
+            raise InputError(
+                f"R must be a rotation matrix (orthonormal to {ORTHONORMAL_TOLERANCE:g}, "
+                f"det = +1); max |R·Rᵀ − I| is {dev:.2g} and det {np.linalg.det(r):.6g}: "
+                "check that R was written with at least 6 significant digits"
+            )
+        if dev > 1e-12:  # printed with 6–9 digits (OpenCV, Kalibr, phone metadata): snap to SO(3)
+            r = nearest_rotation(r)
         object.__setattr__(self, "R", frozen(r))
         object.__setattr__(self, "t", frozen(t))
 
