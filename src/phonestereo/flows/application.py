@@ -11,7 +11,9 @@ Blocks, in order, each named as the thesis names it (§4.1.3) and each recorded 
 5. **majority depth** — Z over the ROI grid (the rectified ray of each ROI pixel at its
    corrected disparity, depth along the wide's optical axis), the median, and σ from the
    matching bound (the plane fit over Cramér–Rao-weighted matches), the W-T scale's σ and the
-   correction's σ.
+   correction's σ with its systematic and extrapolation parts
+   (:mod:`~phonestereo.learning.extent`); a depth whose σ/Z exceeds
+   ``FlowConfig.max_relative_sigma`` is gated ``extrapolation`` with the reason.
 """
 
 from __future__ import annotations
@@ -149,8 +151,11 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     z_raw = ref.backproject(m.roi_grid, d_grid)[:, 2]
     corr_v = np.zeros(len(d_grid))
     corr_s = np.zeros(len(d_grid))
+    parts: dict[str, Any] = {}
     if config.learned_correction and inputs.corrector is not None:
-        c = inputs.corrector.correct(np.column_stack([m.roi_grid, d_grid]), orientation)
+        c, parts = inputs.corrector.correct_parts(
+            np.column_stack([m.roi_grid, d_grid]), orientation
+        )
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
                           stages=stages, seconds=time.perf_counter() - t0)  # fmt: skip
@@ -172,7 +177,22 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     stages["sigma_px"] = {
         "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
         "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),
+        **{f"correction_{n}": round(float(v[k]), 5) for n, v in parts.items()},
     }  # fmt: skip
+    if not sigma_z <= config.max_relative_sigma * depth:
+        ext = inputs.corrector.extents.get(inputs.corrector.bucket(orientation)) if (
+            inputs.corrector is not None) else None  # fmt: skip
+        learned = "" if ext is None else (
+            f"; learned disparities {ext.d_lo_px:.1f}–{ext.d_hi_px:.1f} px")  # fmt: skip
+        return _gated(
+            entry.id, "extrapolation",
+            f"depth {depth:.3f} m would carry "
+            + (f"σ {sigma_z:.3f} m" if np.isfinite(sigma_z) else "an unbounded σ")
+            + f" (> {config.max_relative_sigma:.0%} of it): the capture lies beyond what was "
+            f"learned (disparity {float(d_grid[k]):.1f} px"
+            f"{learned}); learn from faces at this distance and sensor position",
+            gates, stages=stages, seconds=time.perf_counter() - t0,
+        )  # fmt: skip
     return DepthResult(
         entry.id, True, depth, sigma_z, "", "",
         float(np.median(d_grid)), float(np.median(d_fix)), float(np.median(corr_v)),
