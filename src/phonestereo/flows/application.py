@@ -146,16 +146,15 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         return _gated(
             entry.id, "measure", m.reason, gates, stages=stages, seconds=time.perf_counter() - t0
         )
-    d_grid, sd_grid = m.plane.predict(m.roi_grid)
+    grid = m.roi_grid
+    d_grid, sd_grid = m.plane.predict(grid)
     stages["majority_disparity_px"] = round(m.majority_px, 5)
-    z_raw = ref.backproject(m.roi_grid, d_grid)[:, 2]
+    z_raw = ref.backproject(grid, d_grid)[:, 2]
     corr_v = np.zeros(len(d_grid))
     corr_s = np.zeros(len(d_grid))
     parts: dict[str, Any] = {}
     if config.learned_correction and inputs.corrector is not None:
-        c, parts = inputs.corrector.correct_parts(
-            np.column_stack([m.roi_grid, d_grid]), orientation
-        )
+        c, parts = inputs.corrector.correct_parts(np.column_stack([grid, d_grid]), orientation)
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
                           stages=stages, seconds=time.perf_counter() - t0)  # fmt: skip
@@ -165,12 +164,12 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
         }  # fmt: skip
     d_fix = d_grid + corr_v
-    z = ref.backproject(m.roi_grid, d_fix)[:, 2]
+    z = ref.backproject(grid, d_fix)[:, 2]
     k = int(np.argsort(z)[len(z) // 2])  # the median grid point
     depth = float(np.median(z))
     sigma_wt = 0.0
     if m.wt is not None and m.wt.ok:
-        x_t = m.roi_grid[k, 0] - d_grid[k]
+        x_t = grid[k, 0] - d_grid[k]
         sigma_wt = float(m.wt.sigma_scale * abs(x_t - m.wt.center_px[0]))
     sigma_d = float(np.sqrt(sd_grid[k] ** 2 + sigma_wt**2 + corr_s[k] ** 2))
     sigma_z = depth * sigma_d / max(float(d_fix[k]), 1e-9)

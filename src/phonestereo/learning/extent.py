@@ -25,7 +25,7 @@ Examples
 ...        for i, (x, d) in enumerate([(900.0, 12.0), (1000.0, 12.1), (1100.0, 11.9),
 ...                                    (950.0, 12.05)])]
 >>> ext = LearnedExtent.from_observations(obs)
->>> (round(ext.d_lo_px, 2), round(ext.d_hi_px, 2))
+>>> (round(ext.d_lo_px, 1), round(ext.d_hi_px, 1))
 (11.6, 11.8)
 >>> inside, far = ext.extra_sigma_px([[1000.0, 750.0, 11.7], [1000.0, 750.0, 4.5]])[1]
 >>> bool(far > 10 * inside)       # one distance learned: the gain is unknown below it
