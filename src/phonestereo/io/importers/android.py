@@ -192,6 +192,10 @@ def _load_dump(dump: Path) -> tuple[AndroidSession, list[tuple[Path, AndroidCapt
                 f"has {sorted(session.cameras)}; give each capture both physical cameras"
             )
         captures.append((f, cap))
+    # Captures in time order (the manifest's order), file name breaking ties.
+    wide_first = {i: min(c.cameras[i].sensor_timestamp for _, c in captures) for i in session.cameras}
+    key_id = min(wide_first, key=lambda i: (wide_first[i], i))
+    captures.sort(key=lambda fc: (fc[1].cameras[key_id].sensor_timestamp, fc[0].name))
     return session, captures
 
 

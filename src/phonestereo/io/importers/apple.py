@@ -166,13 +166,17 @@ def import_apple(dump: str | os.PathLike[str], out: str | os.PathLike[str]) -> I
     cams: dict[str, Camera] = {}
     fits: dict[str, float] = {}
     entries, images = [], []
-    for f in files:
-        cap = validate_dump(AppleCapture, read_json(f, "capture file"), f.name, DOC)
+    loaded = [(f, validate_dump(AppleCapture, read_json(f, "capture file"), f.name, DOC))
+              for f in files]  # fmt: skip
+    for f, cap in loaded:
         if sorted(cap.cameras) != sorted(ids):
             raise InputError(
                 f"{f.name}: key 'cameras': has {sorted(cap.cameras)} but session.json has "
                 f"{sorted(ids)}; give each capture both cameras"
             )
+    # Captures in time order (the manifest's order), file name breaking ties.
+    loaded.sort(key=lambda fc: (fc[1].cameras[wide_id].timestamp_s, fc[0].name))
+    for f, cap in loaded:
         for i in ids:
             img = root / cap.cameras[i].image
             size = image_size(img, f"cameras.{i}.image", f.name)
