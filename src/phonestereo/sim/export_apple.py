@@ -31,7 +31,7 @@ from phonestereo.errors import InputError
 from phonestereo.geometry import Camera
 from phonestereo.io import Calibration, Manifest
 from phonestereo.io.importers.apple import R_BACK
-from phonestereo.io.importers.apple_lut import apple_distort, image_grid
+from phonestereo.io.importers.apple_lut import apple_distort, image_grid, r_max
 from phonestereo.io.importers.apple_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import image_to_platform_K
 
@@ -47,8 +47,30 @@ def _ref_camera(cam: Camera) -> tuple[np.ndarray, tuple[float, float]]:
     return K, (2.0 * cam.width, 2.0 * cam.height)
 
 
+def _table_lsq(
+    src: np.ndarray, dst: np.ndarray, center: np.ndarray, ref: tuple[float, float], n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The table m minimising |apple_distort(src) − dst| for a fixed centre: linear least
+    squares (a table value enters through the interpolation weights). Returns (m, residual)."""
+    v = src - center
+    r = np.hypot(v[:, 0], v[:, 1])
+    pos = np.clip(r / r_max(center, ref) * (n - 1), 0.0, n - 1.0)
+    lo = np.minimum(pos.astype(int), n - 2)
+    frac = pos - lo
+    W = np.zeros((r.size, n))
+    W[np.arange(r.size), lo] = 1.0 - frac
+    W[np.arange(r.size), lo + 1] += frac
+    A = np.concatenate([W * v[:, :1], W * v[:, 1:]])
+    b = np.concatenate([dst[:, 0] - src[:, 0], dst[:, 1] - src[:, 1]])
+    m, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return m, A @ m - b
+
+
 def lut_for_camera(cam: Camera, n: int = LUT_SIZE) -> dict[str, Any]:
     """Apple's distortion description of ``cam``: centre, table, inverse table, and the loss.
+
+    The centre is found by variable projection (for a fixed centre the table is a linear
+    least-squares problem).
 
     Returns
     -------
@@ -60,23 +82,13 @@ def lut_for_camera(cam: Camera, n: int = LUT_SIZE) -> dict[str, Any]:
     inv = np.linalg.inv(K)
     pu = image_grid(ref, (41, 31))
     xn = (pu - K[:2, 2]) @ inv[:2, :2].T
-    xd = cam.lens.distort(xn)
-    pd = xd @ K[:2, :2].T + K[:2, 2]
-
-    def residual(p: np.ndarray) -> np.ndarray:
-        return (apple_distort(pu, p[:2], p[2:], ref) - pd).ravel()
-
-    p0 = np.concatenate([K[:2, 2], np.zeros(n)])
-    sol = least_squares(residual, p0, x_scale="jac")
-    center, table = sol.x[:2], sol.x[2:]
-    loss = float(np.hypot(*residual(sol.x).reshape(-1, 2).T).max()) * 0.5
+    pd = cam.lens.distort(xn) @ K[:2, :2].T + K[:2, 2]
+    sol = least_squares(lambda c: _table_lsq(pu, pd, c, ref, n)[1], K[:2, 2], x_scale=10.0)
+    center = sol.x
+    table, res = _table_lsq(pu, pd, center, ref, n)
+    loss = float(np.hypot(*res.reshape(2, -1)).max()) * 0.5
     # The inverse table: least squares too, so that inverse(forward(p)) ≈ p over the image.
-    pd_apple = apple_distort(pu, center, table, ref)
-
-    def residual_inv(m: np.ndarray) -> np.ndarray:
-        return (apple_distort(pd_apple, center, m, ref) - pu).ravel()
-
-    inverse = least_squares(residual_inv, -table, x_scale="jac").x
+    inverse, _ = _table_lsq(apple_distort(pu, center, table, ref), pu, center, ref, n)
     return {"center": center, "table": table, "inverse": inverse, "loss_px": loss}
 
 
