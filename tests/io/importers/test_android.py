@@ -58,7 +58,7 @@ def test_real_pixel_camera2_vector_imports_under_the_documented_conventions() ->
     assert full.lens.coefficients == pytest.approx((0.08679182, -0.113809735, 0, 0, 0.053207975))
     half = output_camera(chars, res, (2016, 1512), "pixel", "0")  # a half-size stream
     assert half.fx == pytest.approx(2775.4246 / 2, abs=1e-4)
-    assert half.cx == pytest.approx(0.5 * 2019.7947 - 0.5, abs=1e-4)  # 1008.897
+    assert half.cx == pytest.approx(0.5 * 2019.7947 - 0.5, abs=1e-4)  # 1009.397
     T = camera_to_device(chars)
     np.testing.assert_allclose(T.R, R_PIXEL, atol=1e-7)  # 8 printed digits of 1/√2
     np.testing.assert_allclose(T.t, 0.0, atol=0)  # the primary camera: position (0, 0, 0)
