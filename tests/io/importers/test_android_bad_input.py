@@ -94,3 +94,23 @@ def test_good_dump_imports_and_never_overwrites(good_dump: Path, tmp_path: Path)
     assert len(load_capture_set(tmp_path / "set").captures()) == 4
     with pytest.raises(InputError, match="not an empty folder"):
         import_android(good_dump, tmp_path / "set")
+
+
+def test_cli_gives_exit_2_with_the_key_and_json_on_success(good_dump: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from phonestereo.cli import app
+
+    dump = tmp_path / "dump"
+    shutil.copytree(good_dump, dump)
+    session = json.loads((dump / "session.json").read_text())
+    session["cameras"]["4"]["android.lens.poseReference"] = 3
+    (dump / "session.json").write_text(json.dumps(session))
+    r = CliRunner().invoke(app, ["import", "android", str(dump), "--out", str(tmp_path / "bad")])
+    assert r.exit_code == 2 and "poseReference" in r.output and "AUTOMOTIVE" in r.output
+    r = CliRunner().invoke(app, ["import", "android", str(good_dump), "--out",
+                                 str(tmp_path / "set"), "--json"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["captures"] == 4 and out["cameras"] == {"wide": "2", "tele": "4"}
+    assert out["calibration"]["zoom"] == pytest.approx(3.054, abs=1e-3)
