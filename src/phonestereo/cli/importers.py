@@ -58,7 +58,9 @@ def _run(fn: Any, *args: Any, **kwargs: Any) -> Any:
 
 @import_app.command("android")
 def import_android_command(
-    dump: Annotated[Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")],
+    dump: Annotated[
+        Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")
+    ],
     out: Annotated[Path, _OUT],
     as_json: Annotated[bool, _JSON] = False,
 ) -> None:
@@ -76,7 +78,9 @@ def import_android_command(
 
 @import_app.command("apple")
 def import_apple_command(
-    dump: Annotated[Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")],
+    dump: Annotated[
+        Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")
+    ],
     out: Annotated[Path, _OUT],
     as_json: Annotated[bool, _JSON] = False,
 ) -> None:
@@ -116,7 +120,9 @@ def import_exif_command(
     ],
     orientation: Annotated[
         str | None,
-        typer.Option("--orientation", help="Orientation bucket for images without EXIF Orientation."),
+        typer.Option(
+            "--orientation", help="Orientation bucket for images without EXIF Orientation."
+        ),
     ] = None,
     max_gap_s: Annotated[
         float, typer.Option("--max-gap-s", help="Largest wide/tele capture-time gap of a pair.")
@@ -134,7 +140,9 @@ def import_exif_command(
     from phonestereo.io.importers.exif import import_exif
 
     if kind not in ("face", "verification", "scene", "calibration"):
-        raise typer.BadParameter("must be face, verification, scene or calibration", param_hint="--kind")
+        raise typer.BadParameter(
+            "must be face, verification, scene or calibration", param_hint="--kind"
+        )
     if focus_mode not in ("manual", "auto"):
         raise typer.BadParameter("must be manual or auto", param_hint="--focus-mode")
     result = _run(import_exif, wide_glob, tele_glob, calibration, out, kind=kind,

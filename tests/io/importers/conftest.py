@@ -30,8 +30,10 @@ def write_sim_set(root: Path, scenario: str) -> tuple[Calibration, Manifest]:
     write_capture_set(root, plan, render=False)
     cal = load_calibration(root / "calibration.json")
     cs = load_capture_set(root, check_images=False)
-    blank_images(root, [(rel, cam.size) for c in cs.manifest.captures
-                        for rel, cam in ((c.wide, cal.rig.wide), (c.tele, cal.rig.tele))])  # fmt: skip
+    names = []
+    for c in cs.manifest.captures:
+        names += [(c.wide, cal.rig.wide.size), (c.tele, cal.rig.tele.size)]
+    blank_images(root, names)
     return cal, cs.manifest
 
 

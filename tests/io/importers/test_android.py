@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from phonestereo.errors import InputError
 from phonestereo.fixes.orientation import capture_bucket, orientation_bucket
 from phonestereo.io import load_calibration, load_capture_set
 from phonestereo.io.importers.android import (

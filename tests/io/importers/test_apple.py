@@ -15,7 +15,11 @@ import pytest
 from phonestereo.errors import InputError
 from phonestereo.fixes.orientation import capture_bucket, orientation_bucket
 from phonestereo.io import load_calibration, load_capture_set
-from phonestereo.io.importers.apple import extrinsic_transform, gravity_from_core_motion, import_apple
+from phonestereo.io.importers.apple import (
+    extrinsic_transform,
+    gravity_from_core_motion,
+    import_apple,
+)
 from phonestereo.sim.export_apple import lut_for_camera, write_apple_dump
 
 # Printed on a real iPhone as extrinsicMatrix(from: ultraWide, to: wide); each printed "row"
@@ -28,7 +32,9 @@ IPHONE_COLUMNS = [0.9999968, 0.000815, -0.002396,
 
 def test_real_iphone_extrinsic_vector_gives_R_and_t_in_metres() -> None:
     notes: list[str] = []
-    T = extrinsic_transform(IPHONE_COLUMNS, "extrinsicMatrix(from: ultraWide, to: wide)", "t", notes)
+    T = extrinsic_transform(
+        IPHONE_COLUMNS, "extrinsicMatrix(from: ultraWide, to: wide)", "t", notes
+    )
     # X_wide = R X_ultraWide + t: R's first column is the first printed row, and so on.
     R_printed = np.array(IPHONE_COLUMNS[:9]).reshape(3, 3).T
     assert R_printed[0].tolist() == [0.9999968, -0.000826, 0.002392]

@@ -35,7 +35,10 @@ def _jpeg(path: Path, size: tuple[int, int], when: dt.datetime | None, focal: fl
 
 @pytest.fixture()
 def shots(tmp_path: Path) -> Path:
-    wide, tele = Camera((64, 48), 50.0, 50.0, 31.5, 23.5), Camera((64, 48), 150.0, 150.0, 31.5, 23.5)
+    wide, tele = (
+        Camera((64, 48), 50.0, 50.0, 31.5, 23.5),
+        Camera((64, 48), 150.0, 150.0, 31.5, 23.5),
+    )
     cal = Calibration(Rig(wide, tele, Transform.from_rotvec([0, 0, 0], [0, -0.012, 0])))
     save_calibration(tmp_path / "calibration.json", cal)
     for i in range(3):
@@ -86,7 +89,7 @@ def test_swapped_globs_and_wrong_sizes_are_refused(shots: Path) -> None:
                     shots / "calibration.json", shots / "set", kind="scene",
                     focus_mode="auto", time_offset_s=0.0)  # fmt: skip
     _jpeg(shots / "tele_2.jpg", (48, 64), T0 + dt.timedelta(seconds=20), 12.6)
-    with pytest.raises(InputError, match="stored size 48×64.*calibration's tele size"):
+    with pytest.raises(InputError, match=r"stored size 48×64.*calibration's tele size"):
         _import(shots)
 
 

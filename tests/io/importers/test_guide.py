@@ -21,7 +21,7 @@ MARK = "<!-- guide:virtual-phone -->"
 def guide_commands() -> list[list[str]]:
     """The shell lines of the guide's marked block, split like a shell."""
     text = GUIDE.read_text(encoding="utf-8")
-    block = text[text.index(MARK):].split("```sh\n", 1)[1].split("```", 1)[0]
+    block = text[text.index(MARK) :].split("```sh\n", 1)[1].split("```", 1)[0]
     return [shlex.split(line) for line in block.splitlines() if line.strip()]
 
 

@@ -76,7 +76,7 @@ def quaternion_to_matrix(q: Any) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> quaternion_to_matrix([-0.70710678, 0.70710678, 0.0, 0.0]).round(6).tolist()
+    >>> (quaternion_to_matrix([-0.70710678, 0.70710678, 0.0, 0.0]).round(6) + 0.0).tolist()
     [[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]
     """
     x, y, z, w = (float(v) for v in q)
@@ -162,7 +162,8 @@ def gravity_from_accelerometer(a: Any, R_cam_dev: Any) -> tuple[float, float, fl
     Examples
     --------
     >>> R = quaternion_to_matrix([-0.70710678, 0.70710678, 0.0, 0.0])
-    >>> [round(v, 6) for v in gravity_from_accelerometer([9.81, 0.0, 0.0], R)]  # left side down
+    >>> g = gravity_from_accelerometer([9.81, 0.0, 0.0], R)  # right edge up
+    >>> [round(v, 6) + 0.0 for v in g]
     [0.0, 1.0, 0.0]
     """
     acc = np.asarray(a, dtype=np.float64)
@@ -193,7 +194,9 @@ def _load_dump(dump: Path) -> tuple[AndroidSession, list[tuple[Path, AndroidCapt
             )
         captures.append((f, cap))
     # Captures in time order (the manifest's order), file name breaking ties.
-    wide_first = {i: min(c.cameras[i].sensor_timestamp for _, c in captures) for i in session.cameras}
+    wide_first = {
+        i: min(c.cameras[i].sensor_timestamp for _, c in captures) for i in session.cameras
+    }
     key_id = min(wide_first, key=lambda i: (wide_first[i], i))
     captures.sort(key=lambda fc: (fc[1].cameras[key_id].sensor_timestamp, fc[0].name))
     return session, captures
@@ -211,7 +214,9 @@ def import_android(dump: str | os.PathLike[str], out: str | os.PathLike[str]) ->
     """
     root = Path(dump)
     if not root.is_dir():
-        raise InputError(f"Android dump folder '{root}' not found; give the folder with {SESSION_NAME}")
+        raise InputError(
+            f"Android dump folder '{root}' not found; give the folder with {SESSION_NAME}"
+        )
     session, captures = _load_dump(root)
     ids = list(session.cameras)
     pose_refs = {c.pose_reference for c in session.cameras.values()}
@@ -221,7 +226,9 @@ def import_android(dump: str | os.PathLike[str], out: str | os.PathLike[str]) ->
             f"references {sorted(pose_refs)}; their positions cannot be compared"
         )
     T_dev = {i: camera_to_device(session.cameras[i]) for i in ids}
-    entries, images, cams = [], [], {}
+    entries: list[CaptureEntry] = []
+    images: list[tuple[Path, str]] = []
+    cams: dict[str, Camera] = {}
     for path, cap in captures:
         here = {}
         for i in ids:

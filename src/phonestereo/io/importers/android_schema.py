@@ -48,8 +48,10 @@ def _numbers(value: Any, n: int, what: str) -> tuple[float, ...]:
 def _rect(value: Any) -> tuple[int, int, int, int]:
     nums = _numbers(value, 4, "Rect [left, top, right, bottom] in pixels")
     if any(v != int(v) for v in nums) or nums[2] <= nums[0] or nums[3] <= nums[1]:
-        raise ValueError(f"must be integer [left, top, right, bottom] with right > left and "
-                         f"bottom > top, got {list(nums)}")
+        raise ValueError(
+            f"must be integer [left, top, right, bottom] with right > left and "
+            f"bottom > top, got {list(nums)}"
+        )
     left, top, right, bottom = (int(v) for v in nums)
     return left, top, right, bottom
 

@@ -92,7 +92,10 @@ def output_camera(
 ) -> tuple[Camera, float]:
     """The camera of one output image and its lens-fit residual in output pixels."""
     K_ref = intrinsic_matrix(cal, source, camera)
-    ref = (cal.intrinsicMatrixReferenceDimensions.width, cal.intrinsicMatrixReferenceDimensions.height)
+    ref = (
+        cal.intrinsicMatrixReferenceDimensions.width,
+        cal.intrinsicMatrixReferenceDimensions.height,
+    )
     w, h = size
     sx, sy = w / ref[0], h / ref[1]
     if abs(sx / sy - 1.0) > 1.0 / min(w, h):
@@ -156,7 +159,10 @@ def import_apple(dump: str | os.PathLike[str], out: str | os.PathLike[str]) -> I
     focal = {}
     for i in ids:
         c = session.cameras[i]
-        focal[i] = intrinsic_matrix(c, "session.json", i)[0, 0] / c.intrinsicMatrixReferenceDimensions.width
+        focal[i] = (
+            intrinsic_matrix(c, "session.json", i)[0, 0]
+            / c.intrinsicMatrixReferenceDimensions.width
+        )
     wide_id, tele_id = sorted(ids, key=lambda i: focal[i])
     if focal[tele_id] < 1.01 * focal[wide_id]:
         raise InputError(

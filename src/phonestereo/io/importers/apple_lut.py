@@ -36,7 +36,7 @@ N_RADIAL = 6
 GRID = (65, 49)
 
 
-def r_max(center: Sequence[float], ref_size: Sequence[float]) -> float:
+def r_max(center: Any, ref_size: Sequence[float]) -> float:
     """Apple's maximum radius: centre to the farthest image corner (reference pixels)."""
     cx, cy = center
     w, h = ref_size
@@ -44,7 +44,7 @@ def r_max(center: Sequence[float], ref_size: Sequence[float]) -> float:
 
 
 def apple_distort(
-    points: Any, center: Sequence[float], table: Sequence[float], ref_size: Sequence[float]
+    points: Any, center: Any, table: Any, ref_size: Sequence[float]
 ) -> NDArray[np.float64]:
     """Apply a lookup table to points (N, 2) in reference pixels (corner origin), as Apple does."""
     p = np.asarray(points, dtype=np.float64)
@@ -113,5 +113,7 @@ def inverse_consistency(
     """Max distance (reference pixels) of inverse(forward(p)) from p over the image: how well
     the two tables agree."""
     pu = image_grid(ref_size, (17, 13))
-    back = apple_distort(apple_distort(pu, center, table, ref_size), center, inverse_table, ref_size)
+    back = apple_distort(
+        apple_distort(pu, center, table, ref_size), center, inverse_table, ref_size
+    )
     return float(np.hypot(*(back - pu).T).max())

@@ -22,7 +22,6 @@ Examples
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import uuid
@@ -127,33 +126,6 @@ def image_to_platform_K(K: Any, left_top: Sequence[float], scale: Sequence[float
     ]
 
 
-def finite_vector(value: Any, n: int | None, key: str, source: str, what: str) -> list[float]:
-    """Numbers of a dump key as floats, checked: a list (or Camera2's comma-separated string),
-    ``n`` long, all finite. :class:`InputError` naming ``key`` and the fix otherwise."""
-    if isinstance(value, str):
-        try:
-            value = [float(v) for v in value.replace("[", " ").replace("]", " ").split(",")]
-        except ValueError as exc:
-            raise InputError(f"{source}: key '{key}': not a list of numbers ({exc}); {what}") from exc
-    if isinstance(value, bool) or not isinstance(value, list | tuple):
-        raise InputError(f"{source}: key '{key}': must be a list of numbers, got {value!r}; {what}")
-    if n is not None and len(value) != n:
-        raise InputError(
-            f"{source}: key '{key}': needs {n} numbers, got {len(value)}; {what}"
-        )
-    out = []
-    for v in value:
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise InputError(f"{source}: key '{key}': {v!r} is not a number; {what}")
-        if not math.isfinite(v):
-            raise InputError(
-                f"{source}: key '{key}': non-finite value {v!r}; the platform reported no valid "
-                f"value, so re-export the dump or leave the key out if it is optional; {what}"
-            )
-        out.append(float(v))
-    return out
-
-
 def image_size(path: Path, key: str, source: str) -> tuple[int, int]:
     """(width, height) of an image file from its header (no EXIF rotation is applied)."""
     from PIL import Image, UnidentifiedImageError
@@ -170,7 +142,9 @@ def image_size(path: Path, key: str, source: str) -> tuple[int, int]:
         raise InputError(f"{source}: key '{key}': cannot read image '{path}': {exc}") from exc
 
 
-def nearest_rotation_checked(R: Any, key: str, source: str, notes: list[str]) -> NDArray[np.float64]:
+def nearest_rotation_checked(
+    R: Any, key: str, source: str, notes: list[str]
+) -> NDArray[np.float64]:
     """A printed rotation snapped to the nearest rotation (SVD) when orthonormal to 1e-6."""
     r = np.asarray(R, dtype=np.float64)
     err = orthonormality_error(r)

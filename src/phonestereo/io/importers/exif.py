@@ -156,7 +156,9 @@ def import_exif(
     notes += [f"{t.path.name}: no wide image within {max_gap_s:g} s; left out"
               for t in teles if t.path not in used]  # fmt: skip
     if not pairs:
-        raise InputError(f"no wide/tele pair within {max_gap_s:g} s; check the globs or --max-gap-s")
+        raise InputError(
+            f"no wide/tele pair within {max_gap_s:g} s; check the globs or --max-gap-s"
+        )
     t0 = pairs[0][0].time
     entries, images = [], []
     for n, (w, t) in enumerate(pairs):
@@ -179,11 +181,13 @@ def import_exif(
         images += [(w.path, entries[-1].wide), (t.path, entries[-1].tele)]
     manifest = Manifest(description="imported from EXIF JPEGs", captures=entries)
     dest = write_set_atomically(out, cal, manifest, images)
-    return ImportResult(dest, len(entries), {"wide": wide_glob, "tele": tele_glob}, {}, tuple(notes))
+    return ImportResult(
+        dest, len(entries), {"wide": wide_glob, "tele": tele_glob}, {}, tuple(notes)
+    )
 
 
 def _orientation(w: ExifShot, t: ExifShot, fallback: str | None) -> str:
-    tags = {s.orientation for s in (w, t)} - {None}
+    tags = {s.orientation for s in (w, t) if s.orientation is not None}
     if len(tags) > 1:
         raise InputError(
             f"{w.path.name} / {t.path.name}: EXIF Orientation differs ({sorted(tags)}); a pair "
