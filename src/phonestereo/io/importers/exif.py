@@ -25,6 +25,7 @@ import glob
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from phonestereo.errors import InputError
 from phonestereo.io.calibration import load_calibration
@@ -32,6 +33,8 @@ from phonestereo.io.importers.common import ImportResult, write_set_atomically
 from phonestereo.io.manifest import CaptureEntry, Manifest
 
 EXIF_ORIENTATION = {1: "landscape", 3: "landscape-flipped", 6: "portrait", 8: "portrait-flipped"}
+#: The orientation buckets (fixes/orientation.py), the labels --orientation accepts.
+BUCKETS = (*EXIF_ORIENTATION.values(), "face-up", "face-down")
 _EXIF_IFD = 0x8769
 
 
@@ -122,6 +125,10 @@ def import_exif(
     max_gap_s : float
         Largest capture-time difference of a wide/tele pair, seconds.
     """
+    if orientation is not None and orientation not in BUCKETS:
+        raise InputError(
+            f"--orientation {orientation!r} is not a bucket; use one of {list(BUCKETS)}"
+        )
     if time_offset_s < 0:
         raise InputError("--time-offset-s must be >= 0 seconds (camera app start to first pair)")
     cal = load_calibration(calibration)
@@ -165,14 +172,14 @@ def import_exif(
         label = _orientation(w, t, orientation)
         cid = f"e{n:03d}"
         entries.append(
-            CaptureEntry(
+            _capture_entry(
                 id=cid,
                 wide=f"images/{cid}_wide{w.path.suffix.lower()}",
                 tele=f"images/{cid}_tele{t.path.suffix.lower()}",
                 time_s=round(time_offset_s + (w.time - t0).total_seconds(), 6),
                 orientation=label,
-                kind=kind,  # type: ignore[arg-type]
-                focus_mode=focus_mode,  # type: ignore[arg-type]
+                kind=kind,
+                focus_mode=focus_mode,
                 focus_position=(
                     round(1.0 / w.subject_distance_m, 6) if w.subject_distance_m else None
                 ),
@@ -184,6 +191,13 @@ def import_exif(
     return ImportResult(
         dest, len(entries), {"wide": wide_glob, "tele": tele_glob}, {}, tuple(notes)
     )
+
+
+def _capture_entry(**fields: Any) -> CaptureEntry:
+    try:
+        return CaptureEntry(**fields)
+    except ValueError as exc:  # pydantic's ValidationError
+        raise InputError(f"capture '{fields.get('id')}': {exc}") from exc
 
 
 def _orientation(w: ExifShot, t: ExifShot, fallback: str | None) -> str:
