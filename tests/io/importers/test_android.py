@@ -117,3 +117,27 @@ def test_round_trip_reproduces_calibration_and_manifest(sim_set: Path, tmp_path:
             b.focus_group, b.focus_attempt, b.temperature_c)  # fmt: skip
         assert capture_bucket(a.gravity, a.orientation) == capture_bucket(b.gravity, b.orientation)
         assert np.abs(np.subtract(a.gravity, b.gravity)).max() <= 2e-9  # 9 printed digits
+
+
+def test_distortion_corrected_stream_is_pinhole_in_active_array_pixels() -> None:
+    chars = AndroidCharacteristics.model_validate({
+        "android.lens.intrinsicCalibration": [3000.0, 3000.0, 2000.0, 1500.0, 0.0],
+        "android.lens.distortion": [0.1, -0.05, 0.0, 0.001, 0.0],
+        "android.lens.poseRotation": [-0.70710678, 0.70710678, 0.0, 0.0],
+        "android.lens.poseTranslation": [0.0, 0.0, 0.0],
+        "android.lens.poseReference": 0,
+        "android.sensor.info.activeArraySize": [8, 6, 3992, 2994],
+        "android.sensor.info.preCorrectionActiveArraySize": [0, 0, 4000, 3000],
+        "android.sensor.orientation": 90,
+    })  # fmt: skip
+    res = AndroidResult.model_validate({
+        "image": "x.png", "android.sensor.timestamp": 0, "android.control.afMode": 0,
+        "android.distortionCorrection.mode": 2,
+        "android.scaler.cropRegion": [0, 0, 3984, 2988],  # active-array coordinates
+    })  # fmt: skip
+    cam = output_camera(chars, res, (1992, 1494), "t", "0")
+    assert cam.lens.is_identity()  # the ISP removed the distortion
+    # Intrinsics are pre-correction pixels; the active array starts at (8, 6) of them:
+    assert cam.cx == pytest.approx(0.5 * (2000.0 - 8) - 0.5, abs=1e-12)
+    assert cam.cy == pytest.approx(0.5 * (1500.0 - 6) - 0.5, abs=1e-12)
+    assert cam.fx == pytest.approx(1500.0, abs=1e-12)
