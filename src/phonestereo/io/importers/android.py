@@ -255,12 +255,22 @@ def import_android(dump: str | os.PathLike[str], out: str | os.PathLike[str]) ->
             src = here[i][1]
             images.append((src, f"images/{cap.id}_{role}{src.suffix.lower()}"))
     T = T_dev[tele_id] @ T_dev[wide_id].inverse()
+    sync_ms = max(
+        abs(c.cameras[tele_id].sensor_timestamp - c.cameras[wide_id].sensor_timestamp) * 1e-6
+        for _, c in captures
+    )
+    ref = {0: "PRIMARY_CAMERA", 1: "GYROSCOPE"}[session.cameras[wide_id].pose_reference]
+    notes = (
+        f"poses relative to {ref}; baseline {np.linalg.norm(T.t) * 1e3:.3f} mm",
+        f"time_s from the wide camera's android.sensor.timestamp; the tele's differs by up "
+        f"to {sync_ms:.3f} ms",
+    )
     rig = Rig(cams[wide_id], cams[tele_id], T)
     note = f"imported from Android Camera2 characteristics (wide '{wide_id}', tele '{tele_id}')"
     cal = Calibration(rig, CalibrationConditions(note=note))
     manifest = Manifest(description=f"imported from Android dump '{root.name}'", captures=entries)
     dest = write_set_atomically(out, cal, manifest, images)
-    return ImportResult(dest, len(entries), {"wide": wide_id, "tele": tele_id})
+    return ImportResult(dest, len(entries), {"wide": wide_id, "tele": tele_id}, notes=notes)
 
 
 def _entry(
