@@ -13,6 +13,7 @@ from phonestereo.cli import demo as _demo  # noqa: F401
 from phonestereo.cli import depth as _depth  # noqa: F401
 from phonestereo.cli import detect as _detect  # noqa: F401
 from phonestereo.cli import faces as _faces  # noqa: F401
+from phonestereo.cli import importers as _importers  # noqa: F401
 from phonestereo.cli import io_commands as _io  # noqa: F401
 from phonestereo.cli import learn as _learn  # noqa: F401
 from phonestereo.cli import match as _match  # noqa: F401
