@@ -136,7 +136,7 @@ def test_coarse_box_stays_inside_a_rotated_narrow_tele() -> None:
     and the tele's view over the whole disparity range."""
     from matplotlib.path import Path
 
-    from phonestereo.flows.roi_disparity import inscribed_box
+    from phonestereo.flows.view_box import inscribed_box
 
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     diamond = np.column_stack([500 + 200 * np.cos(t), 500 + 200 * np.sin(t)])  # a disc

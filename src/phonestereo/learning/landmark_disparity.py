@@ -39,6 +39,7 @@ from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.features.search import ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 from phonestereo.learning.ipd import IPD_M, face_depth, fit_face_plane
+from phonestereo.learning.tele_search import search_start
 from phonestereo.rectification import Rectification
 
 F64 = NDArray[np.float64]
@@ -419,8 +420,8 @@ def landmark_disparity(
             unmatched.append((i, "no IPD depth"))
             continue
         assert img is not None
-        start, why = _search_start(rect, img, pw[i], float(d_exp[i]), d_tol_px, d_tol_rel,
-                                   max_e_px)  # fmt: skip
+        start, why = search_start(rect, img.left, img.right, pw[i], float(d_exp[i]),
+                                  d_tol_px, d_tol_rel, max_e_px)  # fmt: skip
         if start is None:
             unmatched.append((i, tele_why + why))
         else:
@@ -460,47 +461,3 @@ def landmark_disparity(
     return LandmarkDisparityResult(
         tuple(out), len(faces_wide), len(faces_tele), reason, tuple(sorted(unmatched))
     )
-
-
-def _search_start(
-    rect: Rectification,
-    img: _Rectified,
-    pupils: F64,
-    d_expected: float,
-    d_tol_px: float,
-    d_tol_rel: float,
-    max_e_px: float,
-    min_score: float = 0.6,
-) -> tuple[tuple[float, float] | None, str]:
-    """The landmark (d, e) of a wide face without a tele partner, searched from its rectified
-    pupils (2, 2): one window per eye, NCC over the expected-disparity gate of
-    :func:`match_faces`; both eyes must be in the tele's image and agree within 2 px.
-
-    Returns ((d, e), "") or (None, the reason).
-    """
-    tol = d_tol_px + d_tol_rel * abs(d_expected)
-    guess = pupils - [d_expected, 0.0]
-    raw = rect.unrectify_tele(guess)
-    w, h = rect.rig.tele.size
-    if not (np.isfinite(raw).all() and ((raw >= 0) & (raw <= [w - 1, h - 1])).all()):
-        return None, "an eye is outside the tele's view"
-    ipd = float(np.linalg.norm(pupils[1] - pupils[0]))
-    r = int(np.clip(round(0.3 * ipd), 6, 20))
-    xy = np.rint(pupils).astype(np.int64)
-    hh, ww = img.left.shape
-    if not ((xy >= r + 2) & (xy < [ww - r - 2, hh - r - 2])).all():
-        return None, "an eye is at the rectified image's edge"
-    s = ncc_search(
-        img.left, img.right, xy, radius=r, min_d=int(np.floor(d_expected - tol)),
-        max_d=int(np.ceil(d_expected + tol)), row_tolerance=int(np.ceil(max_e_px)),
-        lr_min_score=np.inf,
-    )  # fmt: skip
-    ok = s.searched & ~s.at_edge & np.isfinite(s.d0) & (s.score >= min_score)
-    if not ok.all():
-        return None, (
-            "no tele face landmarks and the eyes do not correlate with the tele "
-            f"(NCC {np.nan_to_num(s.score).round(2).tolist()} < {min_score})"
-        )
-    if abs(float(s.d0[1] - s.d0[0])) > 2.0 or abs(float(s.e0[1] - s.e0[0])) > 2.0:
-        return None, "no tele face landmarks and the two eyes' searches disagree"
-    return (float(np.mean(s.d0)), float(np.mean(s.e0))), ""
