@@ -48,12 +48,14 @@ from phonestereo.features.landmarks.base import (
 )
 from phonestereo.features.landmarks.eyes import mediapipe_eyes
 from phonestereo.features.landmarks.pose import MAX_YAW_RAD, yaw_from_landmarks
+from phonestereo.features.landmarks.quiet import native_stderr_silenced, quiet_env
 
 Box = tuple[float, float, float, float, float]  # x0, y0, x1, y1 (pixels), score
 
 
 def _solutions() -> Any:
     """``mediapipe.solutions`` (imported lazily: it is slow to import and logs to stderr)."""
+    quiet_env()
     import mediapipe as mp
 
     return mp.solutions
@@ -217,6 +219,11 @@ class MediaPipeBackend(LandmarkBackend):
     def _models(self) -> Iterator[tuple[Any, Any]]:
         # The models are built once per backend and kept (building them costs ~50 ms, more
         # than a face mesh); static-image mode carries no state from one image to the next.
+        # MediaPipe's C++ log lines (graph creation, first runs) are dropped unless verbose.
+        with native_stderr_silenced():
+            yield self._open()
+
+    def _open(self) -> tuple[Any, Any]:
         cached = self.__dict__.get("_open_models")
         if cached is None:
             sol = _solutions()
@@ -231,7 +238,7 @@ class MediaPipeBackend(LandmarkBackend):
             )
             cached = (det, mesh)
             object.__setattr__(self, "_open_models", cached)
-        yield cached
+        return cached
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the open models (they are rebuilt where the copy runs)."""
@@ -244,8 +251,9 @@ class MediaPipeBackend(LandmarkBackend):
         """Release the MediaPipe models (rebuilt on the next call)."""
         cached = self.__dict__.pop("_open_models", None)
         if cached is not None:
-            for m in cached:
-                m.close()
+            with native_stderr_silenced():
+                for m in cached:
+                    m.close()
 
     def detect(self, image: ImageLike) -> FaceResult:
         """Faces of one image (array (H, W) gray / (H, W, 3) BGR uint8, or a path)."""
