@@ -49,7 +49,7 @@ def test_help_and_version_import_no_heavy_module() -> None:
         "from phonestereo.cli import app\n"
         "for args in (['--help'], ['version']):\n"
         "    assert CliRunner().invoke(app, args).exit_code == 0\n"
-        "print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in %r)))\n" % (HEAVY,)
+        f"print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r})))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", out.stdout

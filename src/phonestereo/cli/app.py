@@ -90,9 +90,10 @@ def commands_in(source: str, module: str) -> list[LazyCommand]:
                 for target in node.targets:
                     if isinstance(target, ast.Name):
                         typers[target.id] = _literal(_kw(call, "help"))
-        elif isinstance(node, ast.Expr) and _is_app_call(node.value, "add_typer"):
+        elif isinstance(node, ast.Expr) and isinstance(node.value, ast.Call):
             call = node.value
-            assert isinstance(call, ast.Call)
+            if not _is_app_call(call, "add_typer"):
+                continue
             name = _literal(_kw(call, "name"))
             var = call.args[0] if call.args else None
             help_ = _literal(_kw(call, "help"))
