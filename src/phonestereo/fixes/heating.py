@@ -271,17 +271,26 @@ class WarmupGate:
         """Gate one capture.
 
         ``capture``: a CaptureEntry, mapping or object with ``time_s`` (seconds since the
-        camera app started). ``drift_rate_px_per_s``: the measured drift rate of a static scene
-        at this capture; without it (or NaN) the rate criterion uses ``fit``, and fails, saying
-        so, if there is none.
+        camera app started, or None when unknown). ``drift_rate_px_per_s``: the measured drift
+        rate of a static scene at this capture; without it (or NaN) the rate criterion uses
+        ``fit``, and fails, saying so, if there is none. With ``time_s`` None the gate falls
+        back to the drift-rate check on the measured rate (``fit`` needs a time); the reason
+        always names the check used ("warm-up time check", "drift-rate check: no time_s").
         """
-        t = capture.get("time_s") if isinstance(capture, dict) else getattr(capture, "time_s", None)
-        if t is None or not math.isfinite(float(t)):
+        has = "time_s" in capture if isinstance(capture, dict) else hasattr(capture, "time_s")
+        if not has:
+            raise InputError("the capture needs a finite 'time_s' (seconds since app start)")
+        t = capture["time_s"] if isinstance(capture, dict) else capture.time_s
+        if t is None:  # time unknown (e.g. a phone's EXIF has none): only the rate can decide
+            return self._rate_only(drift_rate_px_per_s)
+        if not math.isfinite(float(t)):
             raise InputError("the capture needs a finite 'time_s' (seconds since app start)")
         t = float(t)
         if self.min_time_s is not None and t < self.min_time_s:
             return GateResult(
-                False, f"not warmed up: {t:.0f} s since start < {self.min_time_s:.0f} s"
+                False,
+                f"not warmed up: {t:.0f} s since start < {self.min_time_s:.0f} s "
+                "(warm-up time check)",
             )
         if self.max_drift_rate_px_per_s is not None:
             rate, source = drift_rate_px_per_s, "measured"
@@ -299,7 +308,39 @@ class WarmupGate:
                     f"still drifting: {source} rate {abs(rate):.2g} px/s > "
                     f"{self.max_drift_rate_px_per_s:.2g} px/s at {t:.0f} s",
                 )
-        return GateResult(True, f"warm at {t:.0f} s")
+        used = "warm-up time" if self.max_drift_rate_px_per_s is None else "drift-rate"
+        if self.min_time_s is not None and self.max_drift_rate_px_per_s is not None:
+            used = "warm-up time and drift-rate"
+        return GateResult(True, f"warm at {t:.0f} s ({used} check)")
+
+    def _rate_only(self, rate: float | None) -> GateResult:
+        """The gate for a capture without ``time_s``: the drift-rate check, with the measured
+        rate only (a fitted curve needs the time); gated, saying why, when it cannot run."""
+        head = "no time_s (seconds since the camera app started), so the warm-up time check "
+        if rate is None or not math.isfinite(rate):
+            return GateResult(
+                False,
+                head + "cannot run, and the drift-rate check needs the measured drift rate of "
+                "a static scene, which was not given: record time_s in the manifest, or "
+                "measure the drift rate",
+            )
+        if self.max_drift_rate_px_per_s is None:
+            return GateResult(
+                False,
+                head + "cannot run, and no max_drift_rate_px_per_s is set for the drift-rate "
+                "check: set one, or record time_s",
+            )
+        if abs(rate) > self.max_drift_rate_px_per_s:
+            return GateResult(
+                False,
+                f"still drifting: measured rate {abs(rate):.2g} px/s > "
+                f"{self.max_drift_rate_px_per_s:.2g} px/s (drift-rate check: no time_s)",
+            )
+        return GateResult(
+            True,
+            f"measured drift rate {abs(rate):.2g} px/s <= {self.max_drift_rate_px_per_s:.2g} "
+            "px/s (drift-rate check: no time_s)",
+        )
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,9 @@ from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen
 ORTHONORMAL_TOLERANCE = 1e-6
 """Largest max |R·Rᵀ − I| accepted: real files print R with 6–9 significant digits."""
 
+SNAP_TOLERANCE = 1e-12
+"""An R further than this from orthonormal (but within ORTHONORMAL_TOLERANCE) is snapped."""
+
 
 def orthonormality_error(r: Array) -> float:
     """max |R·Rᵀ − I| of a 3×3 matrix (0 for an exact rotation).
@@ -67,7 +70,7 @@ class Transform:
                 f"det = +1); max |R·Rᵀ − I| is {dev:.2g} and det {np.linalg.det(r):.6g}: "
                 "check that R was written with at least 6 significant digits"
             )
-        if dev > 1e-12:  # printed with 6–9 digits (OpenCV, Kalibr, phone metadata): snap to SO(3)
+        if dev > SNAP_TOLERANCE:  # printed with 6–9 digits (OpenCV, Kalibr, phones): snap
             r = nearest_rotation(r)
         object.__setattr__(self, "R", frozen(r))
         object.__setattr__(self, "t", frozen(t))

@@ -281,7 +281,8 @@ def calibration_from_dict(data: Any, source: str = "calibration.json") -> Calibr
         if rms is not None and (isinstance(rms, bool) or not isinstance(rms, int | float)):
             raise InputError(f"must be a number of pixels, got {rms!r}")
         Calibration(rig, rms_px=rms)
-    names = d.get("parameter_names", [])
+    names = d.get("parameter_names")
+    names = [] if names is None else names  # null or absent: no covariance names
     with _field(source, "parameter_names"):
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise InputError(f"must be a list of strings, got {names!r}")
