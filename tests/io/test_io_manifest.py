@@ -1,4 +1,4 @@
-"""Capture-set manifest: validation messages name the capture and field (DESIGN §4)."""
+"""Capture-set manifest: validation messages name the capture and field (docs/capture-set.md)."""
 
 from __future__ import annotations
 

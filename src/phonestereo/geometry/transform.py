@@ -1,4 +1,4 @@
-"""Rigid transforms named ``T_a_b`` (maps frame b into frame a; DESIGN §5, thesis eq. 3).
+"""Rigid transforms named ``T_a_b`` (maps frame b into frame a; docs/conventions.md, thesis eq. 3).
 
 ``p_a = T_a_b.apply(p_b) = R · p_b + t`` and ``T_a_c = T_a_b @ T_b_c``.
 """

@@ -1,4 +1,4 @@
-"""The factory calibration file ``calibration.json`` (DESIGN §4, thesis §1.3.2).
+"""The factory calibration file ``calibration.json`` (docs/calibration.md, thesis §1.3.2).
 
 It holds both cameras (size, K, lens model name and coefficients), ``T_tele_wide`` (R as 3×3,
 t in metres, p_tele = R·p_wide + t), the conditions the calibration was made under and, when

@@ -1,4 +1,4 @@
-"""Capture sets: a folder with ``manifest.json`` and the images it lists (DESIGN §4).
+"""Capture sets: a folder with ``manifest.json`` and the images it lists (docs/capture-set.md).
 
 A capture is one wide + tele image pair with what the phone reports about it: the time since
 the camera app started (heating, thesis §3.1), gravity or an orientation label (§3.4), the
@@ -87,7 +87,7 @@ def normalise_orientation(label: str) -> str:
 
 
 class CaptureEntry(pydantic.BaseModel):
-    """One wide + tele capture of a capture set (DESIGN §4).
+    """One wide + tele capture of a capture set (docs/capture-set.md).
 
     Attributes
     ----------
@@ -364,7 +364,7 @@ def load_capture_set(folder: str | os.PathLike[str], *, check_images: bool = Tru
     if not manifest_path.is_file():
         raise InputError(
             f"no {MANIFEST_NAME} in '{root}'; a capture set is a folder with {MANIFEST_NAME} "
-            "and the images it lists (DESIGN §4)"
+            "and the images it lists (docs/capture-set.md)"
         )
     try:
         text = manifest_path.read_text(encoding="utf-8")

@@ -1,4 +1,4 @@
-"""OpenCV FileStorage YAML import/export of a stereo calibration (DESIGN §4).
+"""OpenCV FileStorage YAML import/export of a stereo calibration (docs/calibration.md).
 
 Export writes the names OpenCV's calibration samples use, with a ``_wide`` / ``_tele`` suffix::
 

@@ -1,4 +1,6 @@
-"""MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3, DESIGN §11).
+"""MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3).
+
+Dependencies: docs/architecture.md.
 
 MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few percent of a
 2000-px image is never found on the full frame. The search therefore runs in two stages:
@@ -11,7 +13,8 @@ MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few p
    a side (area interpolation down, cubic up), and Face Mesh (static images,
    ``refine_landmarks=True``) on it. The mesh nearest the crop centre is mapped back:
    MediaPipe's normalised ``x`` has 0 at the crop's left *edge*, so a crop starting at pixel
-   ``X0`` with side ``S`` maps it to ``X0 − 0.5 + x·S`` (DESIGN §5); ``z`` scales by ``S`` too.
+   ``X0`` with side ``S`` maps it to ``X0 − 0.5 + x·S`` (docs/conventions.md); ``z`` scales
+   by ``S`` too.
 
 Faces found twice (overlapping tiles, neighbouring crops) are merged by pupil midpoint.
 Each face gets its pupils (iris centres), the thesis's eye centres
