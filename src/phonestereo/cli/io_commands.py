@@ -174,6 +174,7 @@ def convert_calibration(
         raise _fail(exc) from exc
     c = calibration_summary(cal)
     snapped = r_dev > SNAP_TOLERANCE
+    r_file = (extrinsics or src).name if src.suffix.lower() in _YAML else src.name
     if as_json:
         doc = {
             "wrote": str(out),
@@ -189,7 +190,7 @@ def convert_calibration(
     if snapped:
         typer.echo(
             f"note: R was orthonormal only to {r_dev:.2g} (max |R·Rᵀ − I| as written in "
-            f"{src.name}); it was replaced by the nearest rotation (SVD)",
+            f"{r_file}); it was replaced by the nearest rotation (SVD)",
             err=True,
         )
 
