@@ -212,3 +212,13 @@ def test_time_s_optional_and_the_heating_gate_says_which_check() -> None:
     warm = heated_gate(entry.model_copy(update={"time_s": 200.0}), warmup_s=180.0)
     timed = WarmupGate(min_time_s=180.0).check({"time_s": 200.0})
     assert warm.passed and "warm-up time check" in timed.reason
+
+
+def test_a_folder_as_image_and_an_infinite_t_are_named() -> None:
+    # Issue #19: a folder was "not found"; t = inf was reported under the field T_tele_wide.R.
+    with pytest.raises(InputError, match="is a folder, not an image file"):
+        read_gray(Path(__file__).parent)
+    d = calibration_to_dict(_cal())
+    d["T_tele_wide"]["t"] = [float("inf"), 0.0, 0.0]
+    with pytest.raises(InputError, match=r"field 'T_tele_wide\.t': must be 3 finite numbers"):
+        calibration_from_dict(d)

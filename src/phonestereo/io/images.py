@@ -53,6 +53,8 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
         The file is missing, cannot be decoded or is empty.
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
     if not p.is_file():
         raise InputError(f"image file not found: '{p}'; check the path")
     try:
