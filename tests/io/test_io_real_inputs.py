@@ -16,8 +16,8 @@ from typer.testing import CliRunner
 from phonestereo.cli import io_commands  # noqa: F401  (registers the commands)
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError
-from phonestereo.fixes.heating import WarmupGate
 from phonestereo.fixes.orientation import BUCKETS
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.flows.gates import fixed_focus_gate, heated_gate
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.io import (

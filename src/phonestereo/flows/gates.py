@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from phonestereo.fixes.heating import WarmupGate
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.io import CaptureEntry
 from phonestereo.learning.learn import capture_orientation
 
@@ -33,7 +33,7 @@ def heated_gate(entry: CaptureEntry, warmup_s: float) -> Gate:
     """§3.1: the module must be warm (time since the camera started ≥ ``warmup_s``).
 
     A capture without ``time_s`` falls back to the drift-rate check
-    (:meth:`~phonestereo.fixes.heating.WarmupGate.check`); a capture set holds no measured
+    (:meth:`~phonestereo.fixes.warmup.WarmupGate.check`); a capture set holds no measured
     drift rate, so such a capture is gated out with a reason that names the check and the
     way out (record ``time_s``).
     """

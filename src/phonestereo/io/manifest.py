@@ -32,59 +32,23 @@ import math
 import os
 from collections import Counter
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath, PureWindowsPath
+from pathlib import Path
 from typing import Any, Literal
 
 import pydantic
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from phonestereo.errors import InputError
+from phonestereo.io.manifest_fields import (
+    ORIENTATION_BUCKETS,
+    normalise_orientation,
+    relative_path,
+)
 
 MANIFEST_NAME = "manifest.json"
 SCHEMA_VERSION = 1
 GRAVITY_TOL = 1e-3
 Vec3 = tuple[float, float, float]
-
-#: The orientation labels a manifest accepts: the buckets of
-#: :func:`phonestereo.fixes.orientation.orientation_bucket` (same names, same order).
-ORIENTATION_BUCKETS: tuple[str, ...] = (
-    "landscape",
-    "landscape-flipped",
-    "portrait",
-    "portrait-flipped",
-    "face-up",
-    "face-down",
-)
-
-
-def _relative_path(value: str) -> str:
-    if not value.strip():
-        raise ValueError("must be a non-empty path relative to the capture-set folder")
-    if PurePosixPath(value).is_absolute() or PureWindowsPath(value).is_absolute():
-        raise ValueError(
-            f"must be a path relative to the capture-set folder, got absolute path {value!r}; "
-            "move the image into the folder and give its relative path"
-        )
-    parts = PurePosixPath(value.replace("\\", "/")).parts
-    depth = 0
-    for part in parts:
-        depth += -1 if part == ".." else (0 if part == "." else 1)
-        if depth < 0:
-            raise ValueError(
-                f"must stay inside the capture-set folder, got {value!r} (its '..' leaves the "
-                "folder); copy the file into the capture set and give its path from there"
-            )
-    return value
-
-
-def normalise_orientation(label: str) -> str:
-    """An orientation label in its bucket spelling: lower case, ``-`` for ``_`` and spaces.
-
-    >>> normalise_orientation("Landscape_Flipped")
-    'landscape-flipped'
-    """
-    return "-".join(label.strip().lower().replace("_", " ").replace("-", " ").split())
-
 
 class CaptureEntry(pydantic.BaseModel):
     """One wide + tele capture of a capture set (docs/capture-set.md).
@@ -145,7 +109,7 @@ class CaptureEntry(pydantic.BaseModel):
     @field_validator("wide", "tele")
     @classmethod
     def _paths(cls, v: str) -> str:
-        return _relative_path(v)
+        return relative_path(v)
 
     @field_validator("gravity")
     @classmethod
@@ -211,7 +175,7 @@ class Manifest(pydantic.BaseModel):
     @field_validator("calibration")
     @classmethod
     def _calibration_path(cls, v: str) -> str:
-        return _relative_path(v)
+        return relative_path(v)
 
     @field_validator("captures")
     @classmethod

@@ -43,10 +43,10 @@ from phonestereo.fixes.heating import (
     MIN_SAMPLES,
     DriftFit,
     HeatingCorrection,
-    WarmupGate,
     drift_rate,
     fit_drift_curve,
 )
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
 from phonestereo.rectification import Rectification
 
