@@ -1,7 +1,5 @@
 """MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3).
 
-Dependencies: docs/architecture.md.
-
 MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few percent of a
 2000-px image is never found on the full frame. The search therefore runs in two stages:
 
