@@ -73,15 +73,27 @@ def commands_in(source: str, module: str) -> list[LazyCommand]:
     >>> src = '''
     ... sub = typer.Typer(help="Things: list, show.")
     ... app.add_typer(sub, name="things")
+    ... other = typer.Typer()
+    ... @other.callback()
+    ... def _other() -> None:
+    ...     \"\"\"Other things.\"\"\"
+    ... app.add_typer(other, name="other")
     ... @app.command("do-it")
     ... def do_it() -> None:
     ...     \"\"\"Do it.\"\"\"
     ... '''
     >>> [(c.name, c.help) for c in commands_in(src, "m")]
-    [('things', 'Things: list, show.'), ('do-it', 'Do it.')]
+    [('things', 'Things: list, show.'), ('other', 'Other things.'), ('do-it', 'Do it.')]
     """
     tree = ast.parse(source)
     typers: dict[str, str] = {}  # variable name → help of `VAR = typer.Typer(help=...)`
+    for node in tree.body:  # or, without help=, the docstring of its `@VAR.callback()`
+        if isinstance(node, ast.FunctionDef):
+            for dec in node.decorator_list:
+                f = dec.func if isinstance(dec, ast.Call) else dec
+                if isinstance(f, ast.Attribute) and f.attr == "callback":
+                    if isinstance(f.value, ast.Name):
+                        typers.setdefault(f"{f.value.id}.callback", ast.get_docstring(node) or "")
     out: list[LazyCommand] = []
     for node in tree.body:
         if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call):
@@ -98,7 +110,7 @@ def commands_in(source: str, module: str) -> list[LazyCommand]:
             var = call.args[0] if call.args else None
             help_ = _literal(_kw(call, "help"))
             if not help_ and isinstance(var, ast.Name):
-                help_ = typers.get(var.id, "")
+                help_ = typers.get(var.id, "") or typers.get(f"{var.id}.callback", "")
             if name:
                 out.append(LazyCommand(name, module, _first_paragraph(help_)))
         elif isinstance(node, ast.FunctionDef):
