@@ -1,6 +1,7 @@
 """``phonestereo simulate`` and ``phonestereo module``: the virtual module from the command line.
 
-Each command is a thin wrapper over :mod:`phonestereo.sim` (DESIGN §6): ``simulate`` plans a
+Each command is a thin wrapper over :mod:`phonestereo.sim` (docs/architecture.md):
+``simulate`` plans a
 scenario and writes its capture set (images, manifest.json, calibration.json,
 ground_truth.json); ``module list`` / ``module show`` print the presets and their schema.
 """
