@@ -40,8 +40,8 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
-from test_calib_sim_support import evaluate_views, render_set, z_summary  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _support.calib_sim import evaluate_views, render_set, z_summary  # noqa: E402
 
 from phonestereo.calibration.solve import CalibrationOptions, calibrate_camera  # noqa: E402
 from phonestereo.sim.calib_scenario import CalibrationConfig  # noqa: E402
