@@ -42,7 +42,6 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _support.calib_sim import evaluate_views, render_set, z_summary  # noqa: E402
-
 from phonestereo.calibration.solve import CalibrationOptions, calibrate_camera  # noqa: E402
 from phonestereo.sim.calib_scenario import CalibrationConfig  # noqa: E402
 

@@ -46,6 +46,7 @@ from phonestereo.sim.module import load_module
 from phonestereo.sim.scenarios import plan_scenario
 from phonestereo.sim.writer import write_capture_set
 
+
 def detect_board(
     image: np.ndarray, pattern: tuple[int, int]
 ) -> tuple[np.ndarray, np.ndarray] | None:

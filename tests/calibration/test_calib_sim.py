@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _support.calib_sim import evaluate_seed, render_set, true_parameters, z_scores, z_summary
 
+from _support.calib_sim import evaluate_seed, render_set, true_parameters, z_scores, z_summary
 from phonestereo.calibration.solve import CalibrationOptions, calibrate_stereo
 from phonestereo.charts.three_plane import ThreePlaneChart
 from phonestereo.errors import InputError

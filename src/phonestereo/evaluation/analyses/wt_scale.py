@@ -6,7 +6,7 @@ ruler; with two charts (``dual-depth``) the first chart found is masked out (its
 grown by 20 %) and the image searched again, so each chart is one disparity cluster (near
 first). Per attempt: focus-fail detection (sharpness of the ROI against the stack's median,
 :mod:`phonestereo.fixes.refocus`); the W-T scale and offset minimising the spread of e
-(:func:`~phonestereo.fixes.focus.fit_wt_scale`), over all points and per chart; for one flat
+(:func:`~phonestereo.fixes.wt_scale.fit_wt_scale`), over all points and per chart; for one flat
 chart also the homography → residual distortion → scale method. Over the stack, per chart:
 the chart's disparity range (all corners, all attempts) and the per-corner range, before and
 after the scale fix (Figures 3-14 to 3-16), and Table 2: a disparity fix learned at the chart's
@@ -42,8 +42,9 @@ from phonestereo.evaluation.analyses.repeatability import (
 )
 from phonestereo.evaluation.chart_ruler import corner_keys, match_detections
 from phonestereo.features.verification import detect_verification_chart
-from phonestereo.fixes.focus import MIN_POINTS, WTScale, fit_wt_scale
+from phonestereo.fixes.focus import MIN_POINTS
 from phonestereo.fixes.refocus import cluster_disparities, flat_scene_scale
+from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.rectification import Rectification
 
@@ -96,7 +97,6 @@ def measure_charts(
 
 def _fit(qw: F64, qt: F64, c: F64) -> WTScale:
     f = fit_wt_scale(qw, qt, c)
-    assert isinstance(f, WTScale)
     return f
 
 
