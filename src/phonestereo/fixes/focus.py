@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 
 #: Fewest point pairs for a scale + offset fit (3 unknowns, some redundancy).
 MIN_POINTS = 6

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError, ShapeError
 from phonestereo.fixes.focus import MIN_POINTS
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 
 #: A capture is a focus fail when its sharpness is below this fraction of the stack's median.
 FOCUS_FAIL_RELATIVE = 0.5

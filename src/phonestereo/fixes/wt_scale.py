@@ -16,7 +16,7 @@ import numpy as np
 
 from phonestereo.errors import ShapeError
 from phonestereo.fixes.focus import MIN_POINTS, _center, _pair, _robust_linear
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from phonestereo.features.matching import MatchConfig, match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.coarse import coarse_disparity, equalise_blur
 from phonestereo.geometry import Rig
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification, RectifyOptions
 
 F64 = Array
