@@ -258,6 +258,8 @@ def calibration_from_dict(data: Any, source: str = "calibration.json") -> Calibr
         t = np.asarray(_require(t_d, "t", source, "T_tele_wide."), dtype=np.float64)
         if t.shape != (3,):
             raise ShapeError(f"must be 3 numbers in metres, got shape {t.shape}")
+        if not np.isfinite(t).all():
+            raise InputError(f"must be 3 finite numbers in metres, got {t.tolist()}")
     with _field(source, "T_tele_wide.R"):
         T = Transform(R, t)
     with _field(source, "T_tele_wide.t"):
