@@ -31,27 +31,6 @@ _PNG = (".png",)
 _JPEG = (".jpg", ".jpeg")
 
 
-def require_image_file(path: str | os.PathLike[str]) -> Path:
-    """``path`` as a Path if it names an existing file; InputError naming what it is otherwise.
-
-    Examples
-    --------
-    >>> import tempfile
-    >>> with tempfile.TemporaryDirectory() as d:
-    ...     try:
-    ...         require_image_file(d)
-    ...     except InputError as err:
-    ...         print(str(err).split(";")[0].endswith("is a folder, not an image file"))
-    True
-    """
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"'{p}' is a folder, not an image file; give the path of one image in it")
-    if not p.is_file():
-        raise InputError(f"image file not found: '{p}'; check the path")
-    return p
-
-
 def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
     """Read an image file as 8-bit grayscale.
 
@@ -70,7 +49,11 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
     InputError
         The file is missing, cannot be decoded or is empty.
     """
-    p = require_image_file(path)
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
+    if not p.is_file():
+        raise InputError(f"image file not found: '{p}'; check the path")
     try:
         data = np.fromfile(p, dtype=np.uint8)
     except OSError as exc:

@@ -16,6 +16,7 @@ import os
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import cv2
@@ -23,7 +24,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.io.images import require_image_file
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -313,7 +313,11 @@ def read_color(path: str | os.PathLike[str]) -> U8:
     InputError
         Missing file or not an image OpenCV decodes.
     """
-    p = require_image_file(path)
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
+    if not p.is_file():
+        raise InputError(f"image file not found: '{p}'; check the path")
     data = np.fromfile(p, dtype=np.uint8)
     img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if img is None or img.size == 0:
