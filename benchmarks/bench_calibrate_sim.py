@@ -1,7 +1,8 @@
 """Calibration on rendered charts with known truth (issue #3 part 2), against OpenCV.
 
 For each seed, the ``calibration`` scenario of ``folded-x3`` (every effect on) is rendered,
-corners are detected in the PNGs (OpenCV order + saddle refinement), and:
+corners are detected in the PNGs by the shipped ``find_chessboard`` (as ``phonestereo
+calibrate``), and:
 
 - the stereo calibration (``radial-odd``, the true 4 radial terms) is compared with the
   ground truth through its own covariance: fraction of parameters within 3σ, RMS and max |z|,

@@ -1,8 +1,9 @@
 """Calibration on rendered charts with known truth (issue #3 part 2, thesis §1.3.2).
 
 The ``calibration`` scenario of ``folded-x3`` with every effect on (sensor noise, defocus,
-heated, odd-order true lenses) is rendered, corners are detected in the PNGs (OpenCV order +
-saddle refinement, never the truth), and the stereo calibration is compared with the ground
+heated, odd-order true lenses) is rendered, corners are detected in the PNGs by the shipped
+``features.chessboard.find_chessboard`` (what ``phonestereo calibrate`` runs; never the truth),
+and the stereo calibration is compared with the ground
 truth through its own covariance: z = (estimate − truth) / σ for every parameter (both
 cameras' intrinsics and lenses, T_tele_wide, every board pose).
 
