@@ -7,9 +7,11 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from phonestereo.cli import app
+from phonestereo.errors import InputError
 from phonestereo.io import write_image
 
 
@@ -97,3 +99,16 @@ def test_detect_chart_refuses_a_nan_rotation_hint(tmp_path: Path) -> None:
         code, msg = _run("detect-chart", str(img), "--rotation-hint", value, "--json")
         assert code == 2, msg  # was exit 1, "no verification chart", the NaN used as a hint
         assert "--rotation-hint" in msg and "finite angle in degrees" in msg
+
+
+def test_force_leaves_an_earlier_phone_dump_alone_and_says_so(tmp_path: Path) -> None:
+    from phonestereo.cli.outputs import prepare_capture_set_folder
+
+    out = tmp_path / "set"
+    assert _simulate(out, "verification")[0] == 0
+    (out / "android").mkdir()
+    (out / "android" / "capture.json").write_text("{}")  # as `simulate --export android` leaves
+    before = _tree(out)
+    with pytest.raises(InputError, match=r"also holds android .*remove those folders"):
+        prepare_capture_set_folder(out, force=True)
+    assert _tree(out) == before  # refused before anything was removed

@@ -21,6 +21,8 @@ from phonestereo.errors import InputError
 from phonestereo.io import parse_manifest
 
 MANIFEST = "manifest.json"
+#: Phone dumps ``simulate --export`` writes beside a capture set.
+EXPORTS = ("android", "apple")
 
 
 def require_output_folder(
@@ -80,6 +82,13 @@ def prepare_capture_set_folder(folder: Path, *, force: bool, flag: str = "--out"
             f"{flag} '{folder}' already holds a capture set ({MANIFEST}); choose another "
             f"{flag}, or pass --force to replace it (its images, manifest, calibration and "
             "ground truth are removed first)"
+        )
+    dumps = [name for name in EXPORTS if (folder / name).exists()]
+    if dumps:
+        raise InputError(
+            f"{flag} '{folder}' also holds {', '.join(dumps)} (an earlier simulate --export); "
+            "--force replaces only the capture set's own files: remove those folders or "
+            f"choose another {flag}"
         )
     try:
         old = parse_manifest(manifest.read_text(encoding="utf-8"), str(manifest))
