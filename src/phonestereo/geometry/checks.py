@@ -1,4 +1,5 @@
-"""Shape and value checks shared by the geometry modules (kornia-style, typed errors)."""
+"""Shape and value checks shared by every layer (kornia-style, typed errors): points,
+matrices, positive scalars, read-only arrays. Public: any module may use them."""
 
 from __future__ import annotations
 
@@ -59,7 +60,7 @@ def require_positive(value: float, name: str, unit: str = "") -> float:
 
 
 def frozen(arr: Array) -> Array:
-    """Return a read-only copy (getters never leak writable internal arrays, DESIGN §5)."""
+    """Return a read-only copy (getters never leak writable arrays, docs/conventions.md)."""
     out = np.array(arr, dtype=np.float64, copy=True)
     out.setflags(write=False)
     return out
