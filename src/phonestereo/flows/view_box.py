@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification
 
 F64 = Array

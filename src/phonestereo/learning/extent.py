@@ -1,4 +1,4 @@
-"""What a learned correction knows, and the σ it owes where it does not (DESIGN §9, issue 18).
+"""What a learned correction knows, and the σ it owes where it does not (issue 18).
 
 The σ of a learned correction (:mod:`~phonestereo.learning.field`,
 :mod:`~phonestereo.learning.lookup`) is the statistical error of its fit. Three more parts
