@@ -129,3 +129,26 @@ def test_focus_correction_scales_the_cameras() -> None:
     # This attempt's tele is 1/1.001 of the median; the hand's offset is not applied.
     assert out.tele.fx == pytest.approx(rig.tele.fx / 1.001, rel=1e-12)
     assert out.tele.cx == rig.tele.cx and out.wide.fx == rig.wide.fx
+
+
+def test_coarse_box_stays_inside_a_rotated_narrow_tele() -> None:
+    """A diagonal baseline turns the rectified frame by 45°: the bounding box of a raw box
+    then holds corners the tele never saw. The coarse box is shrunk into the raw box's outline
+    and the tele's view over the whole disparity range."""
+    from matplotlib.path import Path
+
+    from phonestereo.flows.view_box import inscribed_box
+
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    diamond = np.column_stack([500 + 200 * np.cos(t), 500 + 200 * np.sin(t)])  # a disc
+    tele = np.array([[350.0, 350.0], [700.0, 350.0], [700.0, 700.0], [350.0, 700.0]])
+    box = inscribed_box(diamond, tele, (-2.0, 40.0), (2000, 2000))
+    assert box is not None
+    x, y, w, h = box
+    corners = np.array([[x, y], [x + w - 1, y], [x + w - 1, y + h - 1], [x, y + h - 1]], float)
+    assert Path(diamond).contains_points(corners).all()
+    for d in (-2.0, 40.0):  # the tele counterparts x − d at both ends of the range
+        assert Path(tele).contains_points(corners - [d, 0.0], radius=1.0).all()
+    # and not needlessly small: ≥ 60 % of the largest square in the disc (side 283 px) that
+    # fits the tele's 350 − 42 px wide view
+    assert min(w, h) >= 0.6 * min(283, 308)

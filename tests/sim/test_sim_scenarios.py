@@ -183,3 +183,30 @@ def test_temperature_is_reported_only_if_the_module_reports_it(tmp_path) -> None
     assert temps[0] == pytest.approx(25.0) and temps[-1] == pytest.approx(
         25 + 15 * (1 - np.exp(-180 / 70)), abs=1e-3
     )
+
+
+def test_user_rois_jitter_only_the_roi_and_its_truth() -> None:
+    """``roi_jitter``: a user's ROI (moved and resized by up to ±20 %, possibly off the chart)
+    instead of the oracle box; the captures themselves (and so the images) do not change."""
+    from dataclasses import replace as _replace
+
+    from phonestereo.sim.scenarios import BenchConfig, VerificationConfig
+
+    base = BenchConfig(verification=VerificationConfig(attempts=1))
+    jit = _replace(base, verification=_replace(base.verification, roi_jitter=0.2))
+    spec = load_module("folded-x3")
+    a = [c for c in plan_scenario("thesis-bench", spec, 3, config=base).captures if c.roi]
+    b = [c for c in plan_scenario("thesis-bench", spec, 3, config=jit).captures if c.roi]
+    assert len(a) == len(b) == 9
+    moved = 0
+    for ca, cb in zip(a, b, strict=True):
+        assert repr(ca.state) == repr(cb.state)  # same true capture: same image
+        (xa, ya, wa, ha), (xb, yb, wb, hb) = ca.roi, cb.roi
+        # centre within ±20 % of the size (+1 px rounding), sides within ±20 % (+1 px)
+        assert abs((xb + wb / 2) - (xa + wa / 2)) <= 0.2 * wa + 1
+        assert abs((yb + hb / 2) - (ya + ha / 2)) <= 0.2 * ha + 1
+        assert 0.8 * wa - 1 <= wb <= 1.2 * wa + 1 and 0.8 * ha - 1 <= hb <= 1.2 * ha + 1
+        moved += ca.roi != cb.roi
+        # the truth is the chart's depth in the user's ROI: within 1 % of the oracle's (4° tilt)
+        assert cb.truth.roi_depth_m == pytest.approx(ca.truth.roi_depth_m, rel=0.01)
+    assert moved == 9

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -48,6 +49,15 @@ def demo(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     workers: Annotated[int, typer.Option(help="Rendering processes.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
+    roi_jitter: Annotated[
+        float,
+        typer.Option(
+            help="User ROIs instead of oracle boxes: move and resize each verification ROI by "
+            "up to ± this fraction of its size (0.2 = ±20 %), possibly off the chart.",
+            min=0.0,
+            max=0.5,
+        ),
+    ] = 0.0,
 ) -> None:
     """Simulate the thesis bench, learn, apply and score every stage against ground truth.
 
@@ -58,6 +68,10 @@ def demo(
     t0 = time.perf_counter()
     spec = load_module(module)
     config = BenchConfig() if full else QUICK
+    if roi_jitter > 0:
+        config = replace(
+            config, verification=replace(config.verification, roi_jitter=float(roi_jitter))
+        )
     plan = plan_scenario("thesis-bench", spec, seed, config=config)
     console = Console(stderr=True)
     n_workers = workers or min(2, os.cpu_count() or 1)

@@ -11,7 +11,9 @@ Blocks, in order, each named as the thesis names it (§4.1.3) and each recorded 
 5. **majority depth** — Z over the ROI grid (the rectified ray of each ROI pixel at its
    corrected disparity, depth along the wide's optical axis), the median, and σ from the
    matching bound (the plane fit over Cramér–Rao-weighted matches), the W-T scale's σ and the
-   correction's σ.
+   correction's σ with its systematic and extrapolation parts
+   (:mod:`~phonestereo.learning.extent`); a depth whose σ/Z exceeds
+   ``FlowConfig.max_relative_sigma`` is gated ``extrapolation`` with the reason.
 """
 
 from __future__ import annotations
@@ -144,13 +146,15 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         return _gated(
             entry.id, "measure", m.reason, gates, stages=stages, seconds=time.perf_counter() - t0
         )
-    d_grid, sd_grid = m.plane.predict(m.roi_grid)
+    grid = m.roi_grid
+    d_grid, sd_grid = m.plane.predict(grid)
     stages["majority_disparity_px"] = round(m.majority_px, 5)
-    z_raw = ref.backproject(m.roi_grid, d_grid)[:, 2]
+    z_raw = ref.backproject(grid, d_grid)[:, 2]
     corr_v = np.zeros(len(d_grid))
     corr_s = np.zeros(len(d_grid))
+    parts: dict[str, Any] = {}
     if config.learned_correction and inputs.corrector is not None:
-        c = inputs.corrector.correct(np.column_stack([m.roi_grid, d_grid]), orientation)
+        c, parts = inputs.corrector.correct_parts(np.column_stack([grid, d_grid]), orientation)
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
                           stages=stages, seconds=time.perf_counter() - t0)  # fmt: skip
@@ -160,19 +164,34 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
         }  # fmt: skip
     d_fix = d_grid + corr_v
-    z = ref.backproject(m.roi_grid, d_fix)[:, 2]
+    z = ref.backproject(grid, d_fix)[:, 2]
     k = int(np.argsort(z)[len(z) // 2])  # the median grid point
     depth = float(np.median(z))
     sigma_wt = 0.0
     if m.wt is not None and m.wt.ok:
-        x_t = m.roi_grid[k, 0] - d_grid[k]
+        x_t = grid[k, 0] - d_grid[k]
         sigma_wt = float(m.wt.sigma_scale * abs(x_t - m.wt.center_px[0]))
     sigma_d = float(np.sqrt(sd_grid[k] ** 2 + sigma_wt**2 + corr_s[k] ** 2))
     sigma_z = depth * sigma_d / max(float(d_fix[k]), 1e-9)
     stages["sigma_px"] = {
         "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
         "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),
+        **{f"correction_{n}": round(float(v[k]), 5) for n, v in parts.items()},
     }  # fmt: skip
+    if not sigma_z <= config.max_relative_sigma * depth:
+        ext = inputs.corrector.extents.get(inputs.corrector.bucket(orientation)) if (
+            inputs.corrector is not None) else None  # fmt: skip
+        learned = "" if ext is None else (
+            f"; learned disparities {ext.d_lo_px:.1f}–{ext.d_hi_px:.1f} px")  # fmt: skip
+        return _gated(
+            entry.id, "extrapolation",
+            f"depth {depth:.3f} m would carry "
+            + (f"σ {sigma_z:.3f} m" if np.isfinite(sigma_z) else "an unbounded σ")
+            + f" (> {config.max_relative_sigma:.0%} of it): the capture lies beyond what was "
+            f"learned (disparity {float(d_grid[k]):.1f} px"
+            f"{learned}); learn from faces at this distance and sensor position",
+            gates, stages=stages, seconds=time.perf_counter() - t0,
+        )  # fmt: skip
     return DepthResult(
         entry.id, True, depth, sigma_z, "", "",
         float(np.median(d_grid)), float(np.median(d_fix)), float(np.median(corr_v)),

@@ -14,6 +14,7 @@ import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.flows.roi_disparity import RoiConfig
+from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
 from phonestereo.learning.lookup import STRATEGIES, DictionaryLookup
 from phonestereo.learning.observation import Correction, as_observation_array
@@ -55,6 +56,12 @@ class FlowConfig:
         The learned gate: fewest observations in the capture's bucket.
     field_max_degree : int
         Highest polynomial degree over the sensor the smooth field may choose (0..3).
+    focal_rel_sigma : float
+        Relative σ of the wide's focal length at the working focus, a systematic part of the
+        learned correction's σ (:mod:`~phonestereo.learning.extent`).
+    max_relative_sigma : float
+        The extrapolation gate: a depth whose σ/Z exceeds this (the capture lies beyond what
+        was learned) is gated with the reason instead of answered.
     roi : RoiConfig
     """
 
@@ -68,6 +75,8 @@ class FlowConfig:
     lookup: str = "field"
     min_observations: int = 10
     field_max_degree: int = 3
+    focal_rel_sigma: float = FOCAL_REL_SIGMA
+    max_relative_sigma: float = 0.05
     roi: RoiConfig = field(default_factory=RoiConfig)
 
     def __post_init__(self) -> None:
@@ -106,6 +115,15 @@ class FlowConfig:
 ALL_BUCKETS = "all"
 
 
+def _narrow(obs: np.ndarray) -> bool:
+    """True when the learned disparities span too little (< 25 % of their level, e.g. faces at
+    one distance) for a gain over disparity: the field then fits none instead of noise."""
+    if obs.size < 3:
+        return True
+    lo, hi = np.percentile(obs["d_measured_px"], [5, 95])
+    return bool(hi - lo < 0.25 * abs(float(np.median(obs["d_measured_px"]))))
+
+
 class Corrector:
     """The learned correction of a store's observations under a :class:`FlowConfig`.
 
@@ -128,10 +146,15 @@ class Corrector:
         self._lookup: Any
         if config.lookup == "field":
             fcfg = FieldConfig(max_degree=config.field_max_degree, min_degree_gain=0)
-            self._lookup = FieldLookup(obs, pp, fcfg)
+            self._lookup = FieldLookup(obs, pp, fcfg, narrow_gain=_narrow(obs))
         else:
             self._lookup = DictionaryLookup(obs, pp)
         self.capture_sigma_px = self._capture_scatter()
+        self.extents = (
+            {str(b): self._extent(str(b)) for b in np.unique(obs["orientation"])}
+            if obs.size
+            else {}
+        )
 
     def _capture_scatter(self) -> float:
         """Capture-to-capture scatter of the learned observations about the correction, px.
@@ -158,6 +181,15 @@ class Corrector:
         m = np.asarray(means)
         return float(1.4826 * np.median(np.abs(m - np.median(m))))
 
+    def _extent(self, bucket: str) -> LearnedExtent:
+        """The learned extent of a bucket, with residuals about this correction."""
+        ob = self.observations[self.observations["orientation"] == bucket]
+        q = np.column_stack([ob["x_px"], ob["y_px"], ob["d_measured_px"]])
+        r = (ob["d_expected_px"] - ob["d_measured_px"]) - self._raw_correct(q, bucket).value_px
+        return LearnedExtent.from_observations(
+            ob, np.nan_to_num(r), focal_rel_sigma=self.config.focal_rel_sigma
+        )
+
     def _raw_correct(self, query: Any, bucket: str) -> Correction:
         if self.config.lookup == "field":
             c: Correction = self._lookup.correct(query, bucket)
@@ -177,11 +209,32 @@ class Corrector:
 
     def correct(self, query: Any, orientation: str) -> Correction:
         """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels."""
-        c = self._raw_correct(query, self.bucket(orientation))
+        return self.correct_parts(query, orientation)[0]
+
+    def correct_parts(
+        self, query: Any, orientation: str
+    ) -> tuple[Correction, dict[str, np.ndarray]]:
+        """:meth:`correct` and its σ parts (px, each (N,)): ``fit`` (the correction's own
+        statistical error), ``capture`` (a new capture's own offset: the capture-to-capture
+        scatter), ``systematic`` (common-mode scale: the learned captures' relative spread and
+        the focal prior, :class:`~phonestereo.learning.extent.LearnedExtent`)
+        and ``extrapolation`` (beyond the learned disparities and sensor positions)."""
+        bucket = self.bucket(orientation)
+        c = self._raw_correct(query, bucket)
         if not c.ok:
-            return c
-        sigma = np.sqrt(c.sigma_px**2 + self.capture_sigma_px**2)
-        return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason)
+            return c, {}
+        fit = c.sigma_px
+        if self.config.lookup == "field":  # the mean's error; one face's scatter is not ours
+            fit = self._lookup.fits[bucket].field.predict(query, scatter=False).sigma_px
+        n = len(fit)
+        ext = self.extents.get(bucket)
+        sys_px, ext_px = (
+            ext.extra_sigma_px(query, c.value_px) if ext is not None else (np.zeros(n),) * 2
+        )
+        parts = {"fit": fit, "capture": np.full(n, self.capture_sigma_px),
+                 "systematic": sys_px, "extrapolation": ext_px}  # fmt: skip
+        sigma = np.sqrt(sum(v**2 for v in parts.values()))
+        return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason), parts
 
 
 __all__ = ["ALL_BUCKETS", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]

@@ -23,6 +23,7 @@ from phonestereo.errors import InputError
 from phonestereo.features.matching import MatchConfig, match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.coarse import coarse_disparity, equalise_blur
+from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification, RectifyOptions
@@ -327,19 +328,34 @@ def measure_roi(
     counts: dict[str, int] = {}
     lw, rt = win.remap(image_wide, image_tele)
     box_small = win.points_wide(roi_grid(roi, 3))
-    boxes = []
-    for b in (big, wide_box):
-        pts = win.points_wide(roi_grid(b, 3))
-        if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
-            return _fail("the ROI does not map into the rectified view", grid, counts)
-        lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
-        rw, rh = win.wide_rect.size
-        lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-        boxes.append((int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)))
-    box, cbox = boxes
+    if not np.isfinite(box_small).all():
+        return _fail("the ROI does not map into the rectified view", grid, counts)
+    pts = win.points_wide(roi_grid(big, 3))
+    if not np.isfinite(pts).all():
+        return _fail("the ROI does not map into the rectified view", grid, counts)
+    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+    rw, rh = win.wide_rect.size
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
+    box = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
+    # in the bounding box), else — or when that one is ambiguous — the bounding box.
+    pts = win.points_wide(roi_grid(wide_box, 3))
+    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
+    bbox = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    inner = inscribed_box(
+        win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
+        win.wide_rect.size,
+    )  # fmt: skip
+    cboxes = [b for b in (inner, bbox) if b is not None]
+    if inner == bbox:
+        cboxes = [bbox]
     # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
     # (a chessboard's period is inside the disparity range) needs the context around it.
-    d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+    for cbox in cboxes:
+        d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+        if np.isfinite(d0) and peak >= cfg.coarse_min_zncc and second < cfg.max_ambiguity * peak:
+            break
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
     if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
         return _fail(

@@ -34,7 +34,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -68,6 +68,8 @@ class FieldConfig:
         constant gain, the physics of a baseline or focal-length error, §3.6 — the learned
         disparities rarely span enough for cross-validation to prove it, yet it decides the
         extrapolation beyond them).
+    max_gain_degree : int
+        Highest gain degree tried (-1: offsets only, for disparities learned at one distance).
     """
 
     max_degree: int = 3
@@ -76,6 +78,7 @@ class FieldConfig:
     f_scale_px: float | None = None
     seed: int = 0
     min_degree_gain: int = -1
+    max_gain_degree: int = 3
 
     def __post_init__(self) -> None:
         if not -1 <= self.min_degree_gain <= self.max_degree:
@@ -204,12 +207,13 @@ class SmoothField:
     cv: tuple[CVScore, ...]
     frame: _Frame
 
-    def predict(self, query: Any) -> Correction:
-        """Correction at (x_px, y_px, d_measured_px) points, shape (N, 3), with σ."""
+    def predict(self, query: Any, *, scatter: bool = True) -> Correction:
+        """Correction at (x_px, y_px, d_measured_px) points, shape (N, 3), with σ: the fit's
+        ⊕ (``scatter``) one observation's robust scatter."""
         q = as_queries(query)
         A = self.frame.design(q, self.degree_offset, self.degree_gain)
         var_fit = np.einsum("ij,jk,ik->i", A, self.cov, A)
-        sigma = np.sqrt(np.maximum(var_fit, 0) + self.scatter_px**2)
+        sigma = np.sqrt(np.maximum(var_fit, 0) + (self.scatter_px**2 if scatter else 0.0))
         return Correction(A @ self.coef, sigma, np.full(len(q), self.n_used), "field")
 
     def offset_gain(self, xy: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -264,7 +268,7 @@ def _cross_validate(
     clip2 = (3.0 * f / 1.5) ** 2
     models, sq = [], []
     for deg_o in range(cfg.max_degree + 1):
-        for deg_g in range(-1, cfg.max_degree + 1):
+        for deg_g in range(-1, min(cfg.max_degree, cfg.max_gain_degree) + 1):
             p = _n_params(deg_o, deg_g)
             if 3 * p > n_train:
                 continue
@@ -370,10 +374,15 @@ class FieldLookup:
         observations: Any,
         principal_point_px: tuple[float, float] | None = None,
         config: FieldConfig | None = None,
+        *,
+        narrow_gain: bool = False,
     ) -> None:
         obs = as_observation_array(observations)
+        cfg = config or FieldConfig()
+        if narrow_gain:  # too narrow a disparity span to fit a gain: offsets only
+            cfg = replace(cfg, min_degree_gain=-1, max_gain_degree=-1)
         self.fits = {
-            str(o): fit_field(obs[obs["orientation"] == o], principal_point_px, config)
+            str(o): fit_field(obs[obs["orientation"] == o], principal_point_px, cfg)
             for o in np.unique(obs["orientation"])
         }
 

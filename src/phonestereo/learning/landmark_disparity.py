@@ -11,6 +11,9 @@ The learning flow's "landmark disparity estimation" block (Fig. 4-3, 4-4):
 3. wide ↔ tele faces matched by the landmark disparity: the non-disparity error ``e`` of the
    pupils must be small and their disparity near ``d_expected`` (a gate loose enough for the
    naive calibration's ~30 % error, tight enough to separate faces);
+   a wide face without a tele partner (Face Mesh fails on a face that fills a ×5 tele or is
+   cut by its border; the guide missed it) is searched from its own rectified pupils, one
+   NCC window per eye over the same gate, when both eyes are in the tele's image;
 4. the disparity refined around both pupils ("peak refinement"): a grid of windows over each eye
    region of the rectified wide image, integer NCC search in the rectified tele image
    (:func:`~phonestereo.features.search.ncc_search`) then Lucas–Kanade sub-pixel refinement
@@ -36,6 +39,7 @@ from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.features.search import ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 from phonestereo.learning.ipd import IPD_M, face_depth, fit_face_plane
+from phonestereo.learning.tele_search import search_start
 from phonestereo.rectification import Rectification
 
 F64 = NDArray[np.float64]
@@ -50,7 +54,8 @@ class FaceDisparity:
     Attributes
     ----------
     wide_index, tele_index : int
-        Indices of the face in the wide and tele :class:`FaceResult`.
+        Indices of the face in the wide and tele :class:`FaceResult` (tele −1: no tele
+        landmarks, the face was searched from its wide pupils).
     x_px, y_px : float
         Pupil midpoint in the rectified wide image, pixels.
     d_px, sigma_d_px : float
@@ -391,34 +396,42 @@ def landmark_disparity(
     """
     if not faces_wide.found:
         return LandmarkDisparityResult((), 0, len(faces_tele), f"wide: {faces_wide.reason}")
-    if not faces_tele.found:
-        reason = f"tele: {faces_tele.reason}"
-        none = tuple((i, "no face in the tele") for i in range(len(faces_wide)))
-        return LandmarkDisparityResult((), len(faces_wide), 0, reason, none)
     pw = rect.points_wide(_pupils(faces_wide))  # (Nw, 2, 2) rectified
-    pt = rect.points_tele(_pupils(faces_tele))  # (Nt, 2, 2)
+    pt = rect.points_tele(_pupils(faces_tele)).reshape(-1, 2, 2)  # (Nt, 2, 2)
     diff = pw[:, None] - pt[None]  # (Nw, Nt, 2 pupils, 2)
     d_lm, e_lm = diff[..., 0].mean(axis=2), diff[..., 1].mean(axis=2)
     z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode)
     pairs = match_faces(
         d_lm, e_lm, d_exp, max_e_px=max_e_px, d_tol_px=d_tol_px, d_tol_rel=d_tol_rel
     )
-    img = _prepare(rect, image_wide, image_tele) if pairs else None
+    matched = {i for i, _ in pairs}
+    # Faces without a tele partner (Face Mesh failed on a face that fills the tele, the face
+    # is cut by the tele's border, the guide missed it) are searched from the wide pupils.
+    lone = [i for i in range(len(faces_wide)) if i not in matched and np.isfinite(d_exp[i])]
+    img = _prepare(rect, image_wide, image_tele) if pairs or lone else None
     out: list[FaceDisparity] = []
     unmatched: list[tuple[int, str]] = []
-    matched = {i for i, _ in pairs}
+    starts: list[tuple[int, int, float, float]] = [(i, j, d_lm[i, j], e_lm[i, j]) for i, j in pairs]
+    tele_why = f"tele: {faces_tele.reason}; " if not faces_tele.found else ""
     for i in range(len(faces_wide)):
-        if i not in matched:
-            why = "no tele face within the e / expected-disparity gates (outside its view?)"
-            unmatched.append((i, why if np.isfinite(d_exp[i]) else "no IPD depth"))
+        if i in matched:
+            continue
+        if not np.isfinite(d_exp[i]):
+            unmatched.append((i, "no IPD depth"))
+            continue
+        assert img is not None
+        start, why = search_start(rect, img.left, img.right, pw[i], float(d_exp[i]),
+                                  d_tol_px, d_tol_rel, max_e_px)  # fmt: skip
+        if start is None:
+            unmatched.append((i, tele_why + why))
+        else:
+            starts.append((i, -1, start[0], start[1]))
     refined = (
         []
         if img is None
-        else _refine_faces(
-            img, [(pw[i], d_lm[i, j], e_lm[i, j]) for i, j in pairs], min_zncc=min_zncc
-        )
+        else _refine_faces(img, [(pw[i], d0, e0) for i, _, d0, e0 in starts], min_zncc=min_zncc)
     )
-    for (i, j), (d, sd, e, n, zn) in zip(pairs, refined, strict=True):
+    for (i, j, d0, e0), (d, sd, e, n, zn) in zip(starts, refined, strict=True):
         if n == 0:
             unmatched.append((i, "no eye window converged in the tele (blur, occlusion, edge)"))
             continue
@@ -432,8 +445,8 @@ def landmark_disparity(
                 d,
                 sd,
                 e,
-                float(d_lm[i, j]),
-                float(e_lm[i, j]),
+                float(d0),
+                float(e0),
                 float(z[i]),
                 float(d_exp[i]),
                 n,

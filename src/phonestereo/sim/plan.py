@@ -126,14 +126,22 @@ class Planner:
         self.layout = stream(seed, scenario, STREAM_LAYOUT)
 
     def add(
-        self, conditions: CaptureConditions, scene: Scene, roi_size_px: tuple[int, int] | None
+        self,
+        conditions: CaptureConditions,
+        scene: Scene,
+        roi_size_px: tuple[int, int] | None,
+        roi_jitter: float = 0.0,
     ) -> PlannedCapture:
-        """Draw the true state of one capture, its ROI (if asked) and its ground truth."""
+        """Draw the true state of one capture, its ROI (if asked; ``roi_jitter``:
+        :func:`jitter_roi`) and its ground truth."""
         i = len(self.captures)
         state = true_state(
             self.module, conditions, stream(self.seed, self.scenario, STREAM_STATE, i)
         )
         roi = None if roi_size_px is None else chart_roi(state, scene, roi_size_px)
+        if roi is not None and roi_jitter > 0:
+            rng = stream(self.seed, self.scenario, "roi-jitter", i)  # images stay the same
+            roi = jitter_roi(roi, roi_jitter, rng, state.wide.camera.size)
         pc = PlannedCapture(state, scene, roi, capture_truth(state, scene, roi), i)
         self.captures.append(pc)
         return pc
@@ -173,6 +181,28 @@ def chart_roi(
         return None
     box = np.rint([cx - half_w, cy - half_h, 2 * half_w, 2 * half_h]).astype(int)
     return int(box[0]), int(box[1]), int(box[2]), int(box[3])
+
+
+def jitter_roi(
+    roi: tuple[int, int, int, int],
+    jitter: float,
+    rng: np.random.Generator,
+    size: tuple[int, int],
+) -> tuple[int, int, int, int]:
+    """A user's ROI instead of the oracle box: centre moved and each side scaled by uniform
+    draws within ±``jitter`` of the box's size, kept inside the image only (it may leave the
+    chart: a user's box is not shrunk to it).
+
+    >>> jitter_roi((900, 700, 200, 150), 0.2, np.random.default_rng(0), (2000, 1500))
+    (929, 701, 163, 121)
+    """
+    x, y, w, h = roi
+    u = rng.uniform(-jitter, jitter, 4)
+    cx, cy = x + w / 2 + u[0] * w, y + h / 2 + u[1] * h
+    w2, h2 = w * (1 + u[2]), h * (1 + u[3])
+    x0, y0 = max(0.0, cx - w2 / 2), max(0.0, cy - h2 / 2)
+    x1, y1 = min(float(size[0]), cx + w2 / 2), min(float(size[1]), cy + h2 / 2)
+    return round(x0), round(y0), max(round(x1 - x0), 16), max(round(y1 - y0), 16)
 
 
 def device_pose_towards(offset_n: tuple[float, float], roll_rad: float = 0.0) -> Transform:

@@ -157,7 +157,10 @@ class LearningConfig:
 
 @dataclass(frozen=True)
 class VerificationConfig:
-    """Verification chart at each distance, handheld, each a refocus stack with an ROI."""
+    """Verification chart at each distance, handheld, each a refocus stack with an ROI: the
+    oracle box (centred on the chart, shrunk to stay on it), or with ``roi_jitter`` > 0 a
+    user's box (:func:`~phonestereo.sim.plan.jitter_roi`: moved and resized by up to ±that
+    fraction of its size, possibly off the chart; the images do not change)."""
 
     distances_m: tuple[float, ...] = (0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 4.0)
     attempts: int = 5
@@ -165,6 +168,7 @@ class VerificationConfig:
     handheld: bool = True
     roi_px: tuple[int, int] = (200, 150)
     tilt_deg: float = 4.0
+    roi_jitter: float = 0.0
     timing: Timing = Timing()
 
     @classmethod
@@ -208,9 +212,11 @@ def _stack(
     pose: Any = LANDSCAPE,
     handheld: bool = False,
     roi: tuple[int, int] | None = (200, 150),
+    roi_jitter: float = 0.0,
 ) -> float:
     for k in range(cfg.attempts):
-        p.add(_conditions(f"{group}_{k}", kind, t, pose, handheld, cfg, group, k), scene, roi)
+        conditions = _conditions(f"{group}_{k}", kind, t, pose, handheld, cfg, group, k)
+        p.add(conditions, scene, roi, roi_jitter)
         t += cfg.timing.attempt_s
     return t + cfg.timing.group_gap_s
 
@@ -310,7 +316,8 @@ def _plan_verification(p: Planner, module: ModuleSpec, cfg: VerificationConfig, 
     for i, d in enumerate(cfg.distances_m):
         tilt = p.layout.normal(size=3) * np.deg2rad([cfg.tilt_deg, cfg.tilt_deg, 1.0])
         scene = _verification_scene(module, d, tilt)
-        t = _stack(p, scene, cfg, f"V{i:02d}", t, handheld=cfg.handheld, roi=cfg.roi_px)
+        t = _stack(p, scene, cfg, f"V{i:02d}", t, handheld=cfg.handheld, roi=cfg.roi_px,
+                   roi_jitter=cfg.roi_jitter)  # fmt: skip
     return t
 
 

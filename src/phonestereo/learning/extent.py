@@ -1,0 +1,174 @@
+"""What a learned correction knows, and the σ it owes where it does not (issue 18).
+
+The σ of a learned correction (:mod:`~phonestereo.learning.field`,
+:mod:`~phonestereo.learning.lookup`) is the statistical error of its fit. Three more parts
+are common to every capture it corrects, so a set's captures are all right or all wrong
+together unless σ carries them:
+
+- **systematic (common-mode) scale** ``rho``: the IPD ruler gives depth as f_wide·IPD/ipd_px,
+  so the correction inherits every relative error of that scale — the spread of the learned
+  captures' own relative offsets (their focus, pose and landmark biases differ; shared faces
+  and focus keep them from averaging out over the captures), and the wide's
+  focal length at the working focus, which the IPD ruler cannot see (depth from IPD and from
+  disparity scale alike with it; a phone wide of ~4 mm breathes ~0.4 % per dioptre of focus
+  between the factory calibration and use, §3.5). σ_sys = rho · d;
+- **extrapolation in disparity**: beyond the learned disparities the correction's gain is
+  only as good as the capture-level regression of offset on disparity says (captures, not
+  faces, are the independent units); σ_x = σ_gain · (distance outside the learned range);
+- **extrapolation over the sensor**: a query far from every learned sensor position carries
+  the capture-to-capture scatter once more per unit of distance beyond ``reach``.
+
+Examples
+--------
+>>> from phonestereo.learning.observation import Observation
+>>> obs = [Observation(x, 750.0, d - 0.3, d, 18 / d, "landscape", "", 0.0, None, f"c{i}")
+...        for i, (x, d) in enumerate([(900.0, 12.0), (1000.0, 12.1), (1100.0, 11.9),
+...                                    (950.0, 12.05)])]
+>>> ext = LearnedExtent.from_observations(obs)
+>>> (round(ext.d_lo_px, 1), round(ext.d_hi_px, 1))
+(11.6, 11.8)
+>>> inside, far = ext.extra_sigma_px([[1000.0, 750.0, 11.7], [1000.0, 750.0, 4.5]])[1]
+>>> bool(far > 10 * inside)       # one distance learned: the gain is unknown below it
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from phonestereo.learning.lookup import as_queries
+from phonestereo.learning.observation import as_observation_array, corrections_px
+
+#: Relative uncertainty of the wide's focal length at the working focus (see module docstring).
+FOCAL_REL_SIGMA = 0.004
+
+_MAD = 1.4826
+
+
+@dataclass(frozen=True)
+class LearnedExtent:
+    """The disparity range and sensor positions a correction was learned on, and its
+    systematic σ parts (module docstring).
+
+    Attributes
+    ----------
+    d_lo_px, d_hi_px : float
+        Learned (measured) disparities, 5th–95th percentile, px.
+    rho : float
+        Relative common-mode σ (capture spread ⊕ focal), dimensionless.
+    rho_captures : float
+        Its capture-spread part.
+    gain_sigma : float
+        σ of the correction's slope over disparity from the capture-level regression, px/px
+        (inf when the captures span too little disparity to tell).
+    capture_sigma_px : float
+        Capture-to-capture scatter of the per-capture mean offsets, px.
+    reach_px : float
+        Sensor distance from the nearest learned position that is still "learned", px.
+    n_captures : int
+    """
+
+    d_lo_px: float
+    d_hi_px: float
+    rho: float
+    rho_captures: float
+    gain_sigma: float
+    capture_sigma_px: float
+    reach_px: float
+    n_captures: int
+    tree: Any
+
+    @classmethod
+    def from_observations(
+        cls,
+        observations: Any,
+        residual_px: Any = None,
+        *,
+        focal_rel_sigma: float = FOCAL_REL_SIGMA,
+    ) -> LearnedExtent:
+        """From learned observations (one bucket) and, when given, their residuals about the
+        fitted correction (px; default: about their mean)."""
+        obs = as_observation_array(observations)
+        c = corrections_px(obs)
+        r = c - np.mean(c) if residual_px is None else np.asarray(residual_px, dtype=np.float64)
+        d = np.asarray(obs["d_measured_px"], dtype=np.float64)
+        d_exp = np.asarray(obs["d_expected_px"], dtype=np.float64)
+        cid = np.unique(obs["capture_id"], return_inverse=True)[1].ravel()
+        g = int(cid.max()) + 1 if cid.size else 0
+        n = np.maximum(np.bincount(cid, minlength=g), 1)
+        mean_r = np.bincount(cid, r, g) / n
+        mean_rel = np.bincount(cid, r / np.where(d_exp > 0, d_exp, np.nan), g) / n
+        mean_c = np.bincount(cid, c, g) / n
+        mean_d = np.bincount(cid, d, g) / n
+        cap = _robust_sd(mean_r) if g >= 4 else 0.0
+        rho_c = _robust_sd(mean_rel) if g >= 4 else 0.0
+        gain_sigma = _slope_sigma(mean_d, mean_c)
+        xy = np.column_stack([obs["x_px"], obs["y_px"]])
+        span = np.ptp(xy, axis=0) if len(xy) else np.zeros(2)
+        reach = max(0.25 * float(np.hypot(*span)), 150.0)
+        lo, hi = np.percentile(d, [5, 95]) if d.size else (np.nan, np.nan)
+        # Not divided by √G: the captures share the chart's faces and the working focus, so
+        # their relative offsets do not average out (measured on folded-x3 seeds 0-3: with
+        # /√G the within-σ of one set fell to 33 %).
+        rho = float(np.hypot(rho_c, focal_rel_sigma))
+        return cls(
+            float(lo), float(hi), rho, float(rho_c),
+            gain_sigma, float(cap), reach, g, cKDTree(xy) if len(xy) else None,
+        )  # fmt: skip
+
+    def outside_px(self, d: Any) -> np.ndarray:
+        """How far disparities lie outside the learned range, px (0 inside)."""
+        d = np.asarray(d, dtype=np.float64)
+        return np.maximum(np.maximum(self.d_lo_px - d, d - self.d_hi_px), 0.0)
+
+    def extra_sigma_px(self, query: Any, correction_px: Any = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(σ_sys, σ_extrapolation) at (x, y, d_measured) queries (N, 3) whose correction is
+        ``correction_px`` (σ_sys scales the corrected disparity), px."""
+        q = as_queries(query)
+        sys = self.rho * np.abs(q[:, 2] + np.asarray(correction_px, dtype=np.float64))
+        dd = self.outside_px(q[:, 2])
+        with np.errstate(invalid="ignore"):
+            ext = np.where(dd > 0, self.gain_sigma * dd, 0.0)
+        if self.tree is not None:
+            dist, _ = self.tree.query(q[:, :2])
+            ext = np.hypot(ext, self.capture_sigma_px * np.maximum(dist / self.reach_px - 1, 0))
+        return sys, ext
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary."""
+        return {
+            "d_lo_px": round(self.d_lo_px, 4), "d_hi_px": round(self.d_hi_px, 4),
+            "rho": round(self.rho, 6), "rho_captures": round(self.rho_captures, 6),
+            "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
+            "capture_sigma_px": round(self.capture_sigma_px, 5), "n_captures": self.n_captures,
+        }  # fmt: skip
+
+
+def _robust_sd(v: np.ndarray) -> float:
+    v = v[np.isfinite(v)]
+    if v.size < 2:
+        return 0.0
+    return float(_MAD * np.median(np.abs(v - np.median(v))))
+
+
+def _slope_sigma(x: np.ndarray, y: np.ndarray) -> float:
+    """Standard error of the slope of y on x over captures (inf when it cannot be told: fewer
+    than 3 captures, or their disparities span less than 10 % of their mean)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    if x.size < 3:
+        return float("inf")
+    sxx = float(np.sum((x - x.mean()) ** 2))
+    if np.ptp(x) < 0.1 * abs(float(np.mean(x))) or sxx <= 0:
+        return float("inf")
+    b = float(np.sum((x - x.mean()) * (y - y.mean())) / sxx)
+    res = y - y.mean() - b * (x - x.mean())
+    s2 = float(np.sum(res**2)) / (x.size - 2) if x.size > 2 else 0.0
+    return float(np.sqrt(s2 / sxx))
+
+
+__all__ = ["FOCAL_REL_SIGMA", "LearnedExtent"]

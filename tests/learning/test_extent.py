@@ -1,0 +1,58 @@
+"""The learned correction's systematic and extrapolation σ (issue 18, item 4)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
+from phonestereo.learning.observation import Observation
+
+
+def _faces(distances_m: tuple[float, ...], seed: int = 0, gain: float = -0.05) -> list:
+    """Face observations at the given distances (f·B = 18 px·m), 8 faces per capture, a true
+    correction c = 0.3 + gain·d, 0.02 px noise, and each capture's own 0.3 % scale error."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for g, z in enumerate(np.repeat(distances_m, 3)):
+        scale = 1 + rng.normal(0, 0.003)
+        for _ in range(8):
+            d_true = 18 / z * rng.uniform(0.97, 1.03)
+            x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
+            c = 0.3 + gain * d_true
+            out.append(Observation(x, y, d_true - c, d_true * scale + rng.normal(0, 0.02),
+                                   z, "landscape", "", 300.0, None, f"c{g}"))  # fmt: skip
+    return out
+
+
+def test_one_distance_leaves_the_gain_unknown_and_the_far_capture_unbounded() -> None:
+    ext = LearnedExtent.from_observations(_faces((1.5,)))
+    assert not np.isfinite(ext.gain_sigma)  # one distance: no slope over disparity
+    sys_px, extra = ext.extra_sigma_px([[1000.0, 750.0, 12.0], [1000.0, 750.0, 4.5]])
+    assert extra[0] == 0.0 and not np.isfinite(extra[1])
+    # the systematic part is at least the focal prior: ρ ≥ 0.4 % of the disparity
+    assert sys_px[0] >= FOCAL_REL_SIGMA * 12.0
+
+
+def test_thin_store_is_gated_beyond_what_it_learned_and_honest_within() -> None:
+    """Faces at 1.5 m only: a chart at 4 m must not get a confident number."""
+    corr = Corrector(_faces((1.5,)), FlowConfig())
+    c, parts = corr.correct_parts([[1000.0, 750.0, 4.5], [1000.0, 750.0, 12.0]], "landscape")
+    assert not np.isfinite(c.sigma_px[0])  # far outside: unbounded (the application gates it)
+    # within the learned disparities: the offset-only field is right to its σ (3σ)
+    truth = 0.3 - 0.05 * (12.0 + 0.3) / 1.05  # d_measured = 1.05·d_true − 0.3
+    assert abs(c.value_px[1] - truth) <= 3 * c.sigma_px[1]
+    assert set(parts) == {"fit", "capture", "systematic", "extrapolation"}
+
+
+def test_three_distances_bound_the_extrapolation() -> None:
+    """Faces at 1–3 m: a query at 4 m (d = 4.5 px, below the learned 6–18 px) gets a finite
+    extra σ that grows with the distance outside the range; the value is right within it."""
+    corr = Corrector(_faces((1.0, 2.0, 3.0)), FlowConfig())
+    ext = corr.extents["landscape"]
+    assert np.isfinite(ext.gain_sigma)
+    c, parts = corr.correct_parts([[1000.0, 750.0, 4.5], [1000.0, 750.0, 2.0]], "landscape")
+    assert 0 < parts["extrapolation"][0] < parts["extrapolation"][1]
+    truth = 0.3 - 0.05 * (4.5 + 0.3) / 1.05  # d_measured = 1.05·d_true − 0.3
+    # within 2σ of the true correction
+    assert abs(c.value_px[0] - truth) <= 2 * c.sigma_px[0]
