@@ -13,11 +13,10 @@ from typer.testing import CliRunner
 
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import Face, FaceResult, LandmarkBackend
-from phonestereo.learning.learn import (
-    capture_orientation,
-    learn_capture_set,
-    orientation_bucket,
-)
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.learning import IpdMode, run
+from phonestereo.io import load_calibration, load_capture_set
+from phonestereo.learning.learn import capture_orientation, orientation_bucket
 from phonestereo.learning.store import FixStore
 from phonestereo.sim.module import load_module
 from phonestereo.sim.scenarios import LearningConfig, plan_scenario
@@ -81,15 +80,24 @@ def test_orientation_bucket() -> None:
         orientation_bucket([0.0, 0.0, 0.0])
 
 
+def learn_set(
+    folder: Path, store: Path, backend: LandmarkBackend, ipd: IpdMode | None = None
+) -> Any:
+    """The learning flow (the one path) on a set, its factory calibration, into ``store``."""
+    cs = load_capture_set(folder)
+    with FixStore(store) as fs:
+        return run(FlowConfig(), cs, load_calibration(cs.calibration_path()), fs,
+                   backend=backend, ipd=ipd)  # fmt: skip
+
+
 def test_learn_capture_set_into_store(capture_set: Path, tmp_path: Path) -> None:
     store = tmp_path / "fixes.sqlite"
     backend = TruthBackend(capture_set, empty={"L00p00_1"})
-    summary = learn_capture_set(
-        capture_set, capture_set / "calibration.json", store, backend=backend
-    )
+    summary = learn_set(capture_set, store, backend)
     # the second capture reports no faces: skipped with the reason, nothing stored for it
-    assert [c for c, _ in summary.skipped] == ["L00p00_1"]
-    assert "no face" in summary.skipped[0][1]
+    skipped = [(c.capture_id, c.reason) for c in summary.captures if not c.ok]
+    assert [c for c, _ in skipped] == ["L00p00_1"]
+    assert "no face" in skipped[0][1]
     with FixStore(store, readonly=True) as fs:
         assert fs.capture_ids() == ["L00p00_0"]
         obs = fs.observations()
@@ -107,20 +115,14 @@ def test_learn_capture_set_into_store(capture_set: Path, tmp_path: Path) -> None
     assert np.all((obs["sigma_px"] > 0) & (obs["sigma_px"] < 0.1))
     d = summary.to_dict()
     assert d["n_learned"] == 1 and d["n_captures"] == 2
-    assert all(r.timing_s["total"] > 0 for r in summary.results)
+    assert all(c.seconds > 0 for c in summary.captures)
 
 
 def test_learn_population_and_relearn(capture_set: Path, tmp_path: Path) -> None:
     store = tmp_path / "pop.sqlite"
     for _ in range(2):  # re-learning replaces a capture's observations (idempotent)
-        summary = learn_capture_set(
-            capture_set,
-            capture_set / "calibration.json",
-            store,
-            population=True,
-            backend=TruthBackend(capture_set),
-        )
-    assert summary.skipped == ()
+        summary = learn_set(capture_set, store, TruthBackend(capture_set), IpdMode.population())
+    assert all(c.ok for c in summary.captures)
     with FixStore(store, readonly=True) as fs:
         obs = fs.observations()
         assert fs.capture_ids() == ["L00p00_0", "L00p00_1"]
@@ -131,11 +133,9 @@ def test_learn_population_and_relearn(capture_set: Path, tmp_path: Path) -> None
     np.testing.assert_allclose(obs["depth_m"], 1.5 * 62.5 / 63, rtol=0.06)
 
 
-def test_bad_ipd_is_rejected(capture_set: Path, tmp_path: Path) -> None:
+def test_bad_ipd_is_rejected() -> None:
     with pytest.raises(InputError, match="ipd"):
-        learn_capture_set(
-            capture_set, capture_set / "calibration.json", tmp_path / "s.sqlite", ipd_mm=6.3
-        )
+        IpdMode.chart(6.3)
 
 
 def test_capture_orientation_from_gravity(capture_set: Path) -> None:
@@ -163,10 +163,8 @@ def test_cli_learn_json_and_bad_input(
 ) -> None:
     import phonestereo.cli.learn  # noqa: F401  (registers the command)
     import phonestereo.flows.learning as flow_mod
-    import phonestereo.learning.learn as learn_mod
     from phonestereo.cli.app import app
 
-    monkeypatch.setattr(learn_mod, "MediaPipeBackend", lambda: TruthBackend(capture_set))
     monkeypatch.setattr(flow_mod, "default_backend", lambda: TruthBackend(capture_set))
     args = ["learn", str(capture_set), "--calibration", str(capture_set / "calibration.json")]
     store = str(tmp_path / "cli_fast.sqlite")

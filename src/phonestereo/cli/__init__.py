@@ -9,6 +9,7 @@ from __future__ import annotations
 from phonestereo.cli import analyze as _analyze  # noqa: F401  (registers commands)
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401
 from phonestereo.cli import charts as _charts  # noqa: F401
+from phonestereo.cli import config as _config  # noqa: F401
 from phonestereo.cli import demo as _demo  # noqa: F401
 from phonestereo.cli import depth as _depth  # noqa: F401
 from phonestereo.cli import detect as _detect  # noqa: F401

@@ -8,7 +8,6 @@ write is opened read-only. Errors (damaged file, bad path) print the store's mes
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Annotated
 
@@ -18,7 +17,7 @@ from rich.markup import escape
 
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError, StoreError
-from phonestereo.learning.store import FixStore, StoreStats
+from phonestereo.learning.store import FixStore, StoreStats, open_for_reading
 
 store_app = typer.Typer(
     help="The fix store of learned disparity corrections: stats, export, vacuum.",
@@ -38,8 +37,7 @@ def _open(path: Path, write: bool = False) -> FixStore:
     """Open an existing store (never create one from an inspection command)."""
     if not path.exists():
         raise StoreError(f"the fix store '{path}' does not exist; check the path")
-    readonly = not write and not os.access(path, os.W_OK)
-    return FixStore(path, readonly=readonly)
+    return FixStore(path) if write else open_for_reading(path)
 
 
 def _kb(n: int) -> str:

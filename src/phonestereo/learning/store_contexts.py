@@ -134,9 +134,7 @@ def _mismatch(path: Path, infos: list[ContextInfo], ctx: StoreContext, action: s
     return f"{head}. To {action} with this store, {fix}"
 
 
-def context_for_learning(
-    conn: sqlite3.Connection, path: Path, ctx: StoreContext, new: bool
-) -> int:
+def context_for_learning(conn: sqlite3.Connection, path: Path, ctx: StoreContext, new: bool) -> int:
     """The id of the context to learn into (created when needed); call inside a write
     transaction.
 
@@ -154,9 +152,7 @@ def context_for_learning(
     raise ContextError(_mismatch(path, infos, ctx, "learn"))
 
 
-def context_for_applying(
-    conn: sqlite3.Connection, path: Path, ctx: StoreContext
-) -> ContextChoice:
+def context_for_applying(conn: sqlite3.Connection, path: Path, ctx: StoreContext) -> ContextChoice:
     """The context whose observations apply under ``ctx`` (module docstring).
 
     Returns ``ContextChoice(None)`` for a store with no observations at all.
