@@ -288,6 +288,7 @@ def test_depth_refuses_another_calibration_or_config(
     assert res.exit_code == 0 and _json(res)["context_id"] == 2
     res = runner.invoke(app, [*depth, "--calibration", str(other), "--json"])
     assert res.exit_code != 2 and _json(res)["store"]["context_id"] == 2
+    assert _json(res)["config"]["roi"]["match"]["max_keypoints"] == 450  # the config used
     doc = _json(runner.invoke(app, ["store", "stats", str(store), "--json"]))
     assert [c["id"] for c in doc["contexts"]] == [1, 2]
 

@@ -148,11 +148,30 @@ def flow_config_schema() -> dict[str, Any]:
     return flow_model().model_json_schema()
 
 
+def knobs_markdown() -> str:
+    """The knob tables of docs/flow-config.md (one per section, defaults from the code)."""
+    parts = []
+    titles = {
+        "flow": ("Top level: `FlowConfig`", FlowConfig(), ""),
+        "roi": ("`roi`: `RoiConfig` (the ROI measurement)", FlowConfig().roi, "roi."),
+        "match": ("`roi.match`: `MatchConfig` (the matcher)", FlowConfig().roi.match, "roi.match."),
+    }
+    for section, (title, inst, prefix) in titles.items():
+        header = "| knob | default | unit | meaning | why the default |"
+        rows = [f"### {title}", "", header, "|---|---|---|---|---|"]
+        for name, (unit, meaning, why) in KNOBS[section].items():
+            value = json.dumps(getattr(inst, name))
+            rows.append(f"| `{prefix}{name}` | `{value}` | {unit} | {meaning} | {why} |")
+        parts.append("\n".join(rows))
+    return "\n\n".join(parts) + "\n"
+
+
 __all__ = [
     "describe",
     "flow_config_from_dict",
     "flow_config_json",
     "flow_config_schema",
     "flow_model",
+    "knobs_markdown",
     "load_flow_config",
 ]
