@@ -57,13 +57,19 @@ from phonestereo.learning.store_schema import (
     SCHEMA_VERSION,
     UNRECORDED,
     backup_file,
+    filesystem_read_only,
     migrate,
     open_connection,
     read_schema_version,
     retry_busy,
     store_error,
 )
-from phonestereo.learning.store_stats import StoreStats, export_store, store_stats
+from phonestereo.learning.store_stats import (  # noqa: F401  (open_for_reading: re-export)
+    StoreStats,
+    export_store,
+    open_for_reading,
+    store_stats,
+)
 
 T = TypeVar("T")
 
@@ -130,9 +136,11 @@ class FixStore:
         if self.readonly:
             if v == 0:
                 raise StoreError(f"'{self.path}' is an empty file, not yet a fix store")
+            ro_fs = filesystem_read_only(self.path.parent)
+            where = "copy it to a writable folder and " if ro_fs else ""
             raise StoreError(
-                f"the fix store '{self.path}' has the old schema version {v}; open it writable "
-                f"once to migrate it to version {SCHEMA_VERSION} (a backup is kept)"
+                f"the fix store '{self.path}' has the old schema version {v}; {where}open it "
+                f"writable once to migrate it to version {SCHEMA_VERSION} (a backup is kept)"
             )
         if v >= 1:  # keep the old file as it was
             self.backup_path = backup_file(self._conn, self.path, v)
@@ -215,20 +223,13 @@ class FixStore:
 
         Re-learning a capture (same context, set fingerprint and id) replaces its earlier
         observations; the same id in another set is another capture. An empty list records
-        the capture as learned with no observations. Only the learning flow
-        (:func:`phonestereo.flows.learning.run`) calls this in the product.
+        the capture as learned with no observations. Only
+        :func:`phonestereo.flows.learning.run` calls this in the product.
 
-        Parameters
-        ----------
-        capture_id : str
-        observations : sequence of Observation
-            All of capture ``capture_id``.
-        context_id : int, optional
-            From :meth:`context_for_learning`; None: an unrecorded context (tests, imports).
-        set_fingerprint : str
-            :func:`~phonestereo.io.fingerprint.capture_set_fingerprint` of its set.
-        set_folder : str
-            Where the set was (informational, for ``store stats``).
+        ``context_id`` comes from :meth:`context_for_learning` (None: an unrecorded context,
+        for tests and imports), ``set_fingerprint`` from
+        :func:`~phonestereo.io.fingerprint.capture_set_fingerprint`; ``set_folder`` is shown
+        by ``store stats``.
 
         Returns
         -------
@@ -397,22 +398,3 @@ class FixStore:
     def __repr__(self) -> str:
         return f"FixStore('{self.path}', readonly={self.readonly})"
 
-
-def open_for_reading(path: str | os.PathLike[str], timeout_s: float = 60.0) -> FixStore:
-    """Open an existing store to read it (``depth``, ``store stats``): writable when the file
-    and its folder are (an old schema is then migrated, with a backup), read-only otherwise
-    (a read-only mount or file), never created.
-
-    Raises
-    ------
-    StoreError
-        The file does not exist, or cannot be opened (the message names the fix).
-    """
-    p = Path(path)
-    if not p.exists():
-        raise StoreError(
-            f"the fix store '{p}' does not exist; check the path, or learn one with "
-            "`phonestereo learn CAPTURE_SET --calibration FILE --store FILE`"
-        )
-    writable = os.access(p, os.W_OK) and os.access(p.parent, os.W_OK | os.X_OK)
-    return FixStore(p, readonly=not writable, timeout_s=timeout_s)

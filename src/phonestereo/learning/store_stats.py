@@ -1,4 +1,4 @@
-"""Read-only summaries of a fix store: ``store stats`` and ``store export`` (DESIGN §4).
+"""Reading a fix store: ``store stats``, ``store export`` and opening one to read it (DESIGN §4).
 
 Kept apart from :mod:`phonestereo.learning.store` (the file and its transactions) so each
 module stays one concept; :meth:`FixStore.stats` and :meth:`FixStore.export` call these.
@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from phonestereo.errors import InputError
+from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.observation import write_observations
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -128,4 +128,26 @@ def export_store(store: FixStore, out: str | os.PathLike[str]) -> int:
     return int(obs.shape[0])
 
 
-__all__ = ["StoreStats", "export_store", "store_stats"]
+def open_for_reading(path: str | os.PathLike[str], timeout_s: float = 60.0) -> FixStore:
+    """Open an existing store to read it (``depth``, ``store stats``): writable when the file
+    and its folder are (an old schema is then migrated, with a backup), read-only otherwise
+    (a read-only mount or file), never created.
+
+    Raises
+    ------
+    StoreError
+        The file does not exist, or cannot be opened (the message names the fix).
+    """
+    from phonestereo.learning.store import FixStore
+
+    p = Path(path)
+    if not p.exists():
+        raise StoreError(
+            f"the fix store '{p}' does not exist; check the path, or learn one with "
+            "`phonestereo learn CAPTURE_SET --calibration FILE --store FILE`"
+        )
+    writable = os.access(p, os.W_OK) and os.access(p.parent, os.W_OK | os.X_OK)
+    return FixStore(p, readonly=not writable, timeout_s=timeout_s)
+
+
+__all__ = ["StoreStats", "export_store", "open_for_reading", "store_stats"]
