@@ -332,7 +332,11 @@ def test_learn_population_is_the_flows_population_mode(
     assert set(cli_obs["source"]) == {"population"}
 
 
-def test_store_commands_leave_a_foreign_database_untouched(tmp_path: Path) -> None:
+def test_store_commands_leave_a_foreign_database_untouched(
+    capture_set: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Today's main switched another application's SQLite file to WAL (header bytes 18-19
+    # 1 → 2) while saying it "was left untouched".
     import sqlite3
 
     path = tmp_path / "photos.db"
@@ -341,8 +345,16 @@ def test_store_commands_leave_a_foreign_database_untouched(tmp_path: Path) -> No
     conn.commit()
     conn.close()
     before = path.read_bytes()
-    for args in (["store", "stats", str(path)], ["store", "vacuum", str(path)]):
+    monkeypatch.setattr(flow_mod, "default_backend", lambda: TruthBackend(capture_set))
+    cal = str(capture_set / "calibration.json")
+    commands = (
+        ["store", "stats", str(path)],
+        ["store", "vacuum", str(path)],
+        ["learn", str(capture_set), "--calibration", cal, "--store", str(path)],
+        ["depth", str(capture_set), "--calibration", cal, "--store", str(path)],
+    )
+    for args in commands:
         res = runner.invoke(app, args)
-        assert res.exit_code == 2 and "not a phonestereo fix store" in res.output
-        assert path.read_bytes() == before  # header bytes 18-19 still 1 (not WAL)
-    shutil.rmtree(tmp_path / "none", ignore_errors=True)
+        assert res.exit_code == 2 and "not a phonestereo fix store" in res.output, args
+        assert path.read_bytes() == before, args  # byte for byte, header included
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["photos.db"]  # no -wal, -shm
