@@ -29,10 +29,20 @@ def make_obs(cid: str, n: int, seed: int = 0) -> list[Observation]:
     rng = np.random.default_rng(seed)
     z = rng.uniform(1.0, 3.0, n)
     return [
-        Observation(float(rng.uniform(0, 2000)), float(rng.uniform(0, 1500)), 18 / zi - 0.4,
-                    18 / zi, float(zi), "landscape", "g1", 200.0, None, cid)
+        Observation(
+            float(rng.uniform(0, 2000)),
+            float(rng.uniform(0, 1500)),
+            18 / zi - 0.4,
+            18 / zi,
+            float(zi),
+            "landscape",
+            "g1",
+            200.0,
+            None,
+            cid,
+        )
         for zi in z
-    ]  # fmt: skip
+    ]
 
 
 def _schema(conn: sqlite3.Connection) -> dict[str, object]:
@@ -103,8 +113,13 @@ def test_colliding_capture_ids_from_two_sets_add_up(tmp_path: Path) -> None:
         for fp, seed in (("set-a", 0), ("set-b", 1)):
             for k in range(3):
                 name = f"IMG_000{k}"
-                st.add_capture(name, make_obs(name, 4, seed=seed + 10 * k), context_id=cid,
-                               set_fingerprint=fp, set_folder=f"/sets/{fp}")  # fmt: skip
+                st.add_capture(
+                    name,
+                    make_obs(name, 4, seed=seed + 10 * k),
+                    context_id=cid,
+                    set_fingerprint=fp,
+                    set_folder=f"/sets/{fp}",
+                )
         s = st.stats()
         assert (s.n_captures, s.n_observations) == (6, 24)  # 2 sets × 3 captures × 4
         assert [(x["fingerprint"], x["n_captures"], x["n_observations"]) for x in s.sets] == [

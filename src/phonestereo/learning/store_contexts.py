@@ -92,9 +92,16 @@ def insert_context(conn: sqlite3.Connection, ctx: StoreContext | None) -> int:
         cur = conn.execute(
             "INSERT INTO contexts (created_unix, calibration_sha256, calibration, lens_model, "
             "rectification_mode, flow_config_sha256, flow_config) VALUES (?, ?, ?, ?, ?, ?, ?)",
-            (time.time(), ctx.calibration_sha256, ctx.calibration, ctx.lens_model,
-             ctx.rectification_mode, ctx.flow_config_sha256, ctx.flow_config),
-        )  # fmt: skip
+            (
+                time.time(),
+                ctx.calibration_sha256,
+                ctx.calibration,
+                ctx.lens_model,
+                ctx.rectification_mode,
+                ctx.flow_config_sha256,
+                ctx.flow_config,
+            ),
+        )
     return int(cur.lastrowid or 0)
 
 

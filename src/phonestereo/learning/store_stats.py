@@ -67,14 +67,20 @@ def store_stats(store: FixStore) -> StoreStats:
         lo, hi = store.query(f"SELECT MIN({col}), MAX({col}) FROM observations")[0]
         ranges[col] = None if lo is None else [float(lo), float(hi)]
     sets = [
-        {"context_id": c, "fingerprint": f, "folder": d, "n_captures": n,
-         "n_observations": int(k), "last_learned_unix": t}
+        {
+            "context_id": c,
+            "fingerprint": f,
+            "folder": d,
+            "n_captures": n,
+            "n_observations": int(k),
+            "last_learned_unix": t,
+        }
         for c, f, d, n, k, t in store.query(
             "SELECT context_id, set_fingerprint, MAX(set_folder), COUNT(*), "
             "SUM(n_observations), MAX(learned_unix) FROM captures "
             "GROUP BY context_id, set_fingerprint ORDER BY context_id, MIN(learned_unix)"
         )
-    ]  # fmt: skip
+    ]
     return StoreStats(
         path=str(store.path),
         schema_version=store.schema_version,
