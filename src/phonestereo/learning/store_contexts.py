@@ -129,9 +129,9 @@ def _mismatch(path: Path, infos: list[ContextInfo], ctx: StoreContext, action: s
         )
     if action == "learn":
         fix = (
-            "learn with the calibration and --config it was learned with, learn into another "
-            "store, or pass --new-context to keep these observations as a separate context in "
-            "the same file. Nothing was written."
+            "use the calibration and --config it was learned with, or another store, or pass "
+            "--new-context to `phonestereo learn` to keep these observations as a separate "
+            "context in the same file. Nothing was written."
         )
     else:
         fix = (
