@@ -24,7 +24,7 @@ from phonestereo.flows.config_file import load_flow_config
 from phonestereo.flows.learning import stack_corrections, store_context
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
-from phonestereo.learning.store import open_for_reading
+from phonestereo.learning.store_open import open_for_reading
 
 
 def _bar(label: str, console: Console, disable: bool) -> Progress:

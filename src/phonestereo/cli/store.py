@@ -17,7 +17,8 @@ from rich.markup import escape
 
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError, StoreError
-from phonestereo.learning.store import FixStore, StoreStats, open_for_reading
+from phonestereo.learning.store import FixStore, StoreStats
+from phonestereo.learning.store_open import open_for_reading
 
 store_app = typer.Typer(
     help="The fix store of learned disparity corrections: stats, export, vacuum.",

@@ -1,4 +1,4 @@
-"""What a fix store's observations were learned under: the *context* (DESIGN §4).
+"""What a fix store's observations were learned under: the *context* (docs/fix-store.md).
 
 A learned correction is only valid for the geometry and the processing it was learned with:
 the same calibration (the rig: both cameras' K, size and lens, and T_tele_wide), the same

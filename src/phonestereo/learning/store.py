@@ -64,12 +64,7 @@ from phonestereo.learning.store_schema import (
     retry_busy,
     store_error,
 )
-from phonestereo.learning.store_stats import (  # noqa: F401  (open_for_reading: re-export)
-    StoreStats,
-    export_store,
-    open_for_reading,
-    store_stats,
-)
+from phonestereo.learning.store_stats import StoreStats, export_store, store_stats
 
 T = TypeVar("T")
 

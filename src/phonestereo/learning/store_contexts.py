@@ -1,4 +1,4 @@
-"""The contexts table of the fix store: find, create and choose a context (DESIGN §4).
+"""The contexts table of the fix store: find, create and choose a context (docs/fix-store.md).
 
 A context (:class:`~phonestereo.learning.provenance.StoreContext`) is what a store's
 observations were learned under. The rules, for a user who keeps one store for months across

@@ -1,4 +1,4 @@
-"""Reading a fix store: ``store stats``, ``store export`` and opening one to read it (DESIGN §4).
+"""Reading a fix store: ``store stats`` and ``store export`` (docs/fix-store.md).
 
 Kept apart from :mod:`phonestereo.learning.store` (the file and its transactions) so each
 module stays one concept; :meth:`FixStore.stats` and :meth:`FixStore.export` call these.
@@ -8,15 +8,37 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-from phonestereo.errors import InputError, StoreError
+import numpy as np
+
+from phonestereo.errors import InputError
 from phonestereo.learning.observation import write_observations
+from phonestereo.learning.store_contexts import ContextInfo
 
-if TYPE_CHECKING:  # pragma: no cover
-    from phonestereo.learning.store import FixStore
+
+class ReadableStore(Protocol):
+    """What these summaries read from a :class:`~phonestereo.learning.store.FixStore` (a
+    protocol, so this module does not import the store: no import cycle)."""
+
+    path: Path
+
+    @property
+    def schema_version(self) -> int: ...
+
+    def query(self, sql: str, args: Sequence[Any] = ()) -> list[tuple[Any, ...]]: ...
+
+    def snapshot(self) -> AbstractContextManager[None]: ...
+
+    def observations(self) -> np.ndarray: ...
+
+    def contexts(self) -> list[ContextInfo]: ...
+
+    def size_bytes(self) -> int: ...
 
 
 @dataclass(frozen=True)
@@ -48,7 +70,7 @@ class StoreStats:
         return asdict(self)
 
 
-def store_stats(store: FixStore) -> StoreStats:
+def store_stats(store: ReadableStore) -> StoreStats:
     """Counts per orientation bucket, focus group and source, and value ranges."""
     by_o = {
         o: {"n": n, "correction_mean_px": m, "correction_std_px": math.sqrt(max(v - m * m, 0))}
@@ -97,7 +119,7 @@ def store_stats(store: FixStore) -> StoreStats:
     )
 
 
-def export_store(store: FixStore, out: str | os.PathLike[str]) -> int:
+def export_store(store: ReadableStore, out: str | os.PathLike[str]) -> int:
     """Write every observation to ``out`` (``.csv`` or ``.json``); returns the row count.
 
     The file is written beside its destination and renamed into place, so a failed export
@@ -134,26 +156,4 @@ def export_store(store: FixStore, out: str | os.PathLike[str]) -> int:
     return int(obs.shape[0])
 
 
-def open_for_reading(path: str | os.PathLike[str], timeout_s: float = 60.0) -> FixStore:
-    """Open an existing store to read it (``depth``, ``store stats``): writable when the file
-    and its folder are (an old schema is then migrated, with a backup), read-only otherwise
-    (a read-only mount or file), never created.
-
-    Raises
-    ------
-    StoreError
-        The file does not exist, or cannot be opened (the message names the fix).
-    """
-    from phonestereo.learning.store import FixStore
-
-    p = Path(path)
-    if not p.exists():
-        raise StoreError(
-            f"the fix store '{p}' does not exist; check the path, or learn one with "
-            "`phonestereo learn CAPTURE_SET --calibration FILE --store FILE`"
-        )
-    writable = os.access(p, os.W_OK) and os.access(p.parent, os.W_OK | os.X_OK)
-    return FixStore(p, readonly=not writable, timeout_s=timeout_s)
-
-
-__all__ = ["StoreStats", "export_store", "open_for_reading", "store_stats"]
+__all__ = ["ReadableStore", "StoreStats", "export_store", "store_stats"]
