@@ -277,6 +277,8 @@ def test_depth_refuses_another_calibration_or_config(
     flow.write_text('{"warmup_s": 120}')
     res = runner.invoke(app, [*depth, "--calibration", str(cal), "--config", str(flow)])
     assert res.exit_code == 2 and "flow config: warmup_s is 180.0 in the store" in res.output
+    res = _learn(monkeypatch, folder, store, "--config", str(flow))  # learn refuses it too
+    assert res.exit_code == 2 and "flow config: warmup_s is 180.0 in the store" in res.output
     # a knob used only when applying (the lookup) does not invalidate what was learned
     flow.write_text('{"lookup": "nearest"}')
     res = runner.invoke(app, [*depth, "--calibration", str(cal), "--config", str(flow)])
