@@ -1,7 +1,8 @@
 """Calibration on rendered charts with known truth (issue #3 part 2), against OpenCV.
 
 For each seed, the ``calibration`` scenario of ``folded-x3`` (every effect on) is rendered,
-corners are detected in the PNGs (OpenCV order + saddle refinement), and:
+corners are detected in the PNGs by the shipped ``find_chessboard`` (as ``phonestereo
+calibrate``), and:
 
 - the stereo calibration (``radial-odd``, the true 4 radial terms) is compared with the
   ground truth through its own covariance: fraction of parameters within 3σ, RMS and max |z|,
@@ -40,9 +41,8 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "calibration"))
-from test_calib_sim_support import evaluate_views, render_set, z_summary  # noqa: E402
-
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _support.calib_sim import evaluate_views, render_set, z_summary  # noqa: E402
 from phonestereo.calibration.solve import CalibrationOptions, calibrate_camera  # noqa: E402
 from phonestereo.sim.calib_scenario import CalibrationConfig  # noqa: E402
 

@@ -67,7 +67,7 @@ BLOCKS = (
     ("  coarse_disparity", "flows/roi_disparity.py", "coarse_disparity"),
     ("  equalise_blur", "flows/roi_disparity.py", "equalise_blur"),
     ("  match_rectified", "features/matching.py", "match_rectified"),
-    ("  fit_wt_scale", "fixes/focus.py", "fit_wt_scale"),
+    ("  fit_wt_scale", "fixes/wt_scale.py", "fit_wt_scale"),
     ("  fit_plane", "flows/roi_disparity.py", "fit_plane"),
     ("reference_rectification", "flows/roi_disparity.py", "reference_rectification"),
     ("Corrector.correct", "flows/config.py", "correct"),

@@ -31,12 +31,12 @@ BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stab
 
 
 def find_chromium() -> str | None:
-    """Path of a Chromium/Chrome executable on PATH, or None."""
+    """Path of a Chromium/Chrome executable on PATH (or Debian's /usr/bin/chromium), or None."""
     for name in BROWSERS:
         path = shutil.which(name)
         if path:
             return path
-    return None
+    return "/usr/bin/chromium" if Path("/usr/bin/chromium").is_file() else None
 
 
 def screenshot(

@@ -58,3 +58,35 @@ def test_one_learning_path() -> None:
     assert _calls("add_capture") == ["flows/learning.py"]
     assert _calls("learn_capture") == ["flows/learning.py"]
     assert _calls("learn_face_capture") == ["flows/learning.py"]
+
+
+def test_no_import_cycle_between_phonestereo_modules() -> None:
+    import grimp  # import-linter's graph builder
+
+    graph = grimp.build_graph("phonestereo")
+    cycles = sorted(
+        (m, imp)
+        for m in graph.modules
+        for imp in graph.find_modules_directly_imported_by(m)
+        if graph.find_shortest_chain(importer=imp, imported=m)
+    )
+    # One concept per module, layers downward: no module imports one that imports it back
+    # (io/calibration.py ↔ io/opencv_yaml.py was the last cycle, issue #19).
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_tests_and_benchmarks_share_helpers_only_through_support() -> None:
+    root = SRC.parents[1]
+    # No test execs a benchmark; no benchmark imports a test module (helpers: tests/_support).
+    execs = [
+        str(p.relative_to(root))
+        for p in (root / "tests").rglob("*.py")
+        if p.name != "test_architecture.py"
+        and re.search(r"spec_from_file_location|benchmarks[\"']? */ *[\"']bench_", p.read_text())
+    ]
+    imports = [
+        str(p.relative_to(root))
+        for p in (root / "benchmarks").glob("*.py")
+        if re.search(r"^\s*(from|import) +(tests\.|test_|conftest)", p.read_text(), re.M)
+    ]
+    assert not execs and not imports, (execs, imports)

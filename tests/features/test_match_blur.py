@@ -2,28 +2,19 @@
 
 Before blur equalisation (features/blur.py) the motorcycle GT-consistent pair with its left
 image blurred by σ = 0.7 px kept 34 of 526 matches: the residual-vs-noise test dropped them
-(blurring lowers the noise, the blur mismatch raises the residual). The helpers are the
-benchmark's (benchmarks/bench_match.py).
+(blurring lowers the noise, the blur mismatch raises the residual). The helpers are shared
+with benchmarks/bench_match.py (tests/_support/stereo_eval.py).
 """
 
 from __future__ import annotations
-
-import importlib.util
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+import _support.stereo_eval as bench
 from phonestereo.features.blur import gaussian_blur, relative_blur
 from phonestereo.features.matching import match_rectified
-
-_SPEC = importlib.util.spec_from_file_location(
-    "bench_match_blur", Path(__file__).resolve().parents[2] / "benchmarks" / "bench_match.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-bench = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(bench)
 
 CASES = [(side, s) for side in ("left", "right") for s in (0.5, 0.7, 1.0)]
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -10,17 +9,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import _support.stereo_eval as bench
 import phonestereo.cli.match  # noqa: F401  (registers the command if cli/__init__ does not)
 from phonestereo.cli import app
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.io import Calibration, save_calibration, write_image
 
-_SPEC = importlib.util.spec_from_file_location(
-    "bench_match", Path(__file__).resolve().parents[2] / "benchmarks" / "bench_match.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-bench = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(bench)
 ADIRONDACK = bench.DATA / "middeval3_Q_Adirondack"
 
 

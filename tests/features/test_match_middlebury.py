@@ -3,22 +3,14 @@
 The acceptance of the sparse matcher (issue #4): ≥ 300 matches per pair; at our points the
 median |d − d_GT| ≤ 0.6 × the smaller of cv2.StereoSGBM's and a naive NCC + parabola
 matcher's at the same points; ≥ 90 % within 0.5 px; Adirondack median ≤ 0.05 px. Measured by
-the benchmark's own evaluation (benchmarks/bench_match.py) so both report the same numbers.
+the evaluation benchmarks/bench_match.py uses (tests/_support/stereo_eval.py): same numbers.
 """
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-_SPEC = importlib.util.spec_from_file_location(
-    "bench_match", Path(__file__).resolve().parents[2] / "benchmarks" / "bench_match.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-bench = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(bench)
+import _support.stereo_eval as bench
 
 pytestmark = pytest.mark.skipif(not bench.DATA.exists(), reason="shared/data not beside the clone")
 

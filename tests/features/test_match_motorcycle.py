@@ -1,6 +1,6 @@
 """Sparse matching on scikit-image's Middlebury 2014 'motorcycle' pair (issue #4 acceptance).
 
-Same evaluation as the MiddEval3 pairs (benchmarks/bench_match.py, ``evaluate_real``): at our
+Same evaluation as the MiddEval3 pairs (tests/_support/stereo_eval.py, ``evaluate_real``): at our
 points, |d − d_GT| for ours, cv2.StereoSGBM and a naive NCC + parabola matcher, on
 non-occluded GT (occlusions found by forward-warping the GT, the file has no mask). The data
 ship inside the scikit-image wheel (no download); skipped without scikit-image.
@@ -8,20 +8,13 @@ ship inside the scikit-image wheel (no download); skipped without scikit-image.
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+import _support.stereo_eval as bench
+
 pytest.importorskip("skimage")
 
-_SPEC = importlib.util.spec_from_file_location(
-    "bench_match_moto", Path(__file__).resolve().parents[2] / "benchmarks" / "bench_match.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-bench = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(bench)
 
 
 @pytest.fixture(scope="module")

@@ -2,26 +2,17 @@
 
 The renderer area-samples a smooth random texture on planes (sim/render.py), the sensor adds
 shot + read noise and quantises to 8 bits; the true left disparity is f·B/Z at every pixel.
-The helpers are the benchmark's (benchmarks/bench_match.py), so tests and benchmark measure
-the same thing.
+The helpers are shared with benchmarks/bench_match.py (tests/_support/stereo_eval.py), so
+tests and benchmark measure the same thing.
 """
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+import _support.stereo_eval as bench
 from phonestereo.features.matching import match_rectified
-
-_SPEC = importlib.util.spec_from_file_location(
-    "bench_match", Path(__file__).resolve().parents[2] / "benchmarks" / "bench_match.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-bench = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(bench)
 
 
 def _errors(planes, size=(320, 240), max_d=32, seed=0):

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 from phonestereo.fixes.focus import (
     ScaleOffset,
     fit_scale_offset,
-    fit_wt_scale,
     normalise_to_median,
 )
+from phonestereo.fixes.wt_scale import fit_wt_scale_per_cluster
 
 C = np.array([1003.2, 748.9])
 
@@ -81,8 +81,7 @@ def test_wt_scale_per_cluster() -> None:
         m = lab == k
         qt[m] = (qt[m] - c) / s + c  # tele shrunk by 1/s: the fix scales by s
     qt[:, 1] += rng.normal(0, 0.02, 400)
-    fits = fit_wt_scale(qw, qt, c, clusters=lab)
-    assert isinstance(fits, dict)
+    fits = fit_wt_scale_per_cluster(qw, qt, c, lab)
     for k, s in scales.items():
         # 0.02 px e noise over a ±125 px spread, 200 points: σ_s ≈ 1e-5.
         assert abs(fits[k].scale - s) < 5e-5, (k, fits[k])

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.fixes.focus import fit_wt_scale
 from phonestereo.fixes.refocus import (
     average_disparities,
     averaging_trials,
@@ -16,6 +15,7 @@ from phonestereo.fixes.refocus import (
     flat_scene_scale,
     sharpness,
 )
+from phonestereo.fixes.wt_scale import fit_wt_scale
 
 
 def _board(n: int = 256, sq: int = 16) -> np.ndarray:

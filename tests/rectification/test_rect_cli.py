@@ -103,3 +103,25 @@ def test_size_mismatch_and_bad_options(pair: dict[str, Path], tmp_path: Path) ->
     pair["cal"] = tmp_path / "missing.json"
     code, out = _run(*_args(pair))
     assert code == 2 and "calibration file" in out
+
+
+def test_out_that_is_a_file_is_refused(pair: dict[str, Path]) -> None:
+    # Was a FileExistsError traceback (issue #19 sweep); now exit 2, the file untouched.
+    pair["out"].write_bytes(b"user data")
+    code, out = _run(*_args(pair))
+    assert code == 2, out
+    assert "--out" in out and "is a file, not a folder" in out and "give a folder path" in out
+    assert pair["out"].read_bytes() == b"user data"
+
+
+def test_earlier_outputs_are_overwritten_only_with_force(pair: dict[str, Path]) -> None:
+    assert _run(*_args(pair))[0] == 0
+    written = {p.name: p.read_bytes() for p in pair["out"].iterdir()}
+    (pair["out"] / "wide_rectified.png").write_bytes(b"edited by the user")
+    code, out = _run(*_args(pair, mode="undistort-both"))
+    assert code == 2, out
+    assert "already holds wide_rectified.png" in out and "--force" in out
+    assert (pair["out"] / "wide_rectified.png").read_bytes() == b"edited by the user"
+    code, out = _run(*_args(pair), "--force")
+    assert code == 0, out
+    assert {p.name: p.read_bytes() for p in pair["out"].iterdir()} == written  # same bytes again

@@ -121,7 +121,8 @@ def _chromium() -> str | None:
     for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
         if shutil.which(name):
             return shutil.which(name)
-    return None
+    # Debian's package, also when PATH is minimal (CI runners, sudo)
+    return "/usr/bin/chromium" if Path("/usr/bin/chromium").is_file() else None
 
 
 def test_report_screenshot_in_headless_chromium(

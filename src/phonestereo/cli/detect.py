@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -118,6 +119,12 @@ def detect_chart(
 
     Example: phonestereo detect-chart wide.png --json --overlay wide_corners.png
     """
+    if not math.isfinite(rotation_hint_deg):
+        raise typer.BadParameter(
+            f"must be a finite angle in degrees (e.g. 0, or 90 for a camera rolled by −90°), "
+            f"got {rotation_hint_deg}",
+            param_hint="--rotation-hint",
+        )
     console = Console(stderr=True)
     try:
         img = read_gray(image)

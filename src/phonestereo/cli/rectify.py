@@ -13,6 +13,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.outputs import require_output_folder
 from phonestereo.errors import InputError
 from phonestereo.io import load_calibration, read_gray, write_image
 from phonestereo.rectification import MODES, Rectification, RectifyOptions, check_mode
@@ -39,13 +40,17 @@ def rectify_files(
     tele: Path,
     out: Path,
     options: RectifyOptions,
+    *,
+    force: bool = False,
 ) -> dict[str, Any]:
     """Rectify one pair of image files into ``out``; returns the summary that is printed.
 
     Writes ``wide_rectified.png``, ``tele_rectified.png`` and ``rectification.json`` (mode,
-    f_px, baseline_m, rectified cameras, rotations, options and the calibration's rig).
+    f_px, baseline_m, rectified cameras, rotations, options and the calibration's rig);
+    earlier ones there only with ``force``.
     """
     t0 = time.perf_counter()
+    require_output_folder(out, (WIDE_PNG, TELE_PNG, JSON_NAME), force=force)
     m = check_mode(mode)
     rig = load_calibration(calibration).rig
     img_w, img_t = read_gray(wide), read_gray(tele)
@@ -77,6 +82,9 @@ def rectify(
     calibration: Annotated[Path, typer.Option(help="calibration.json of the module.")],
     mode: Annotated[str, typer.Option(help=f"Rectification mode: {', '.join(MODES)}.")],
     out: Annotated[Path, typer.Option(help="Output folder (created).")],
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite earlier rectified images in --out.")
+    ] = False,
     resolution: Annotated[
         str, typer.Option(help="Rectified focal length: 'wide' (tele downscaled) or 'tele'.")
     ] = "wide",
@@ -104,7 +112,7 @@ def rectify(
             roi=_roi(roi),
             margin_px=margin,
         )
-        summary = rectify_files(calibration, mode, wide, tele, out, options)
+        summary = rectify_files(calibration, mode, wide, tele, out, options, force=force)
     except InputError as exc:
         # escape: messages hold brackets ("[x, y, w, h]") that Rich would read as markup.
         Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")

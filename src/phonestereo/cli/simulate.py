@@ -20,6 +20,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.outputs import prepare_capture_set_folder
 from phonestereo.errors import InputError
 from phonestereo.sim.module import EFFECT_NAMES, ModuleSpec, list_presets, load_module
 from phonestereo.sim.scenarios import SCENARIOS, plan_scenario
@@ -85,11 +86,16 @@ def simulate_command(
         ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    force: Annotated[
+        bool,
+        typer.Option("--force", help="Replace an earlier capture set in OUT (its files go first)."),
+    ] = False,
 ) -> None:
     """Simulate a scenario of the virtual module and write its capture set.
 
     Writes OUT/images/*.png, OUT/manifest.json, OUT/calibration.json (the imperfect factory
-    calibration) and OUT/ground_truth.json (for evaluation only).
+    calibration) and OUT/ground_truth.json (for evaluation only). OUT must be new or empty;
+    an earlier capture set there is replaced only with --force.
 
     Example: phonestereo simulate verification --module folded-x3 --out runs/ver --seed 1
 
@@ -112,6 +118,10 @@ def simulate_command(
         plan = plan_scenario(scenario, spec, seed, quick=quick)
     except InputError as err:
         raise typer.BadParameter(str(err)) from err
+    try:
+        prepare_capture_set_folder(out, force=force)
+    except InputError as err:
+        raise typer.BadParameter(str(err), param_hint="--out") from err
     console = Console(stderr=True)
     with Progress(
         TextColumn("[bold]{task.description}"),

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from phonestereo.errors import ShapeError
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 from phonestereo.io import Calibration
 
 if TYPE_CHECKING:

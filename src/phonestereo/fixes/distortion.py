@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.geometry._checks import as_points
+from phonestereo.geometry.checks import as_points
 from phonestereo.rectification import MODES, Rectification
 
 F64 = np.ndarray

@@ -48,7 +48,7 @@ import numpy as np
 
 from phonestereo.fixes.focus import ScaleOffset
 from phonestereo.geometry import Rig, essential_scales
-from phonestereo.geometry._checks import Array, as_matrix
+from phonestereo.geometry.checks import Array, as_matrix
 
 VARIANTS = ("eq9", "E", "Om", "OmT")
 REFERENCES = ("focus", "calib")

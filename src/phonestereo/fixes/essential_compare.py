@@ -37,7 +37,7 @@ from phonestereo.fixes.essential import (
 )
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.geometry import Rig
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification
 
 MIN_POINTS = 8

@@ -4,8 +4,8 @@ the flat-scene homography → residual distortion → scale method.
 * :func:`sharpness` and :func:`detect_focus_failures` — §3.5.1 "focus fail": a capture whose
   ROI is far less sharp (variance of the Laplacian) than the stack's median missed focus;
 * :func:`cluster_disparities` — §3.5.2 fix option: group matches by disparity (one cluster per
-  depth) so each depth gets its own W-T scale (:func:`~phonestereo.fixes.focus.fit_wt_scale`
-  with ``clusters=``);
+  depth) so each depth gets its own W-T scale
+  (:func:`~phonestereo.fixes.wt_scale.fit_wt_scale_per_cluster`);
 * :func:`average_disparities` and :func:`averaging_trials` — §3.5.3 option 2 ("Wide-Tele
   matching and average disparity"): per corner / per match, the mean disparity over N refocus
   attempts (Figure 3-21, Table 3);
@@ -26,8 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError, ShapeError
-from phonestereo.fixes.focus import MIN_POINTS, WTScale, fit_wt_scale
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.fixes.focus import MIN_POINTS
+from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
+from phonestereo.geometry.checks import Array, as_points
 
 #: A capture is a focus fail when its sharpness is below this fraction of the stack's median.
 FOCUS_FAIL_RELATIVE = 0.5
@@ -300,7 +301,7 @@ def flat_scene_scale(
        radial displacement of the tele about ``center_px``: r ≈ u·(a_0 + Σ_j a_j ρ^(2j)),
        j = 1..degree; a_0 is the part of the distortion H took as scale and is not applied;
     3. the tele points corrected for that residual distortion only (not warped by H) give the
-       W-T scale and offset (:func:`~phonestereo.fixes.focus.fit_wt_scale`).
+       W-T scale and offset (:func:`~phonestereo.fixes.wt_scale.fit_wt_scale`).
 
     Only valid for a flat scene (one homography). Data that cannot give the fit returns
     ``ok=False`` with the reason.
@@ -340,14 +341,12 @@ def flat_scene_scale(
     qw, qt = qw[ok], qt[ok]
     if len(qw) < max(MIN_POINTS, degree + 5):
         wt = fit_wt_scale(qw, qt, c)
-        assert isinstance(wt, WTScale)
         return FlatSceneScale(np.eye(3), np.zeros(degree), 1.0, np.nan, np.nan, wt, 0, False,
                               f"{len(qw)} matches; the flat-scene method needs >= "
                               f"{max(MIN_POINTS, degree + 5)}")  # fmt: skip
     H, mask = cv2.findHomography(qt, qw, cv2.RANSAC, ransac_px)
     if H is None:
         wt = fit_wt_scale(qw, qt, c)
-        assert isinstance(wt, WTScale)
         return FlatSceneScale(np.eye(3), np.zeros(degree), 1.0, np.nan, np.nan, wt, 0, False,
                               "no homography between the tele and wide points (not a flat "
                               "scene, or degenerate points)")  # fmt: skip
@@ -372,7 +371,6 @@ def flat_scene_scale(
         rms_h = float(np.sqrt(np.mean(b[rows] ** 2))) if it == 0 else rms_h
     corrected = qt + u * sum(a * rho2[:, None] ** (j + 1) for j, a in enumerate(coeffs))
     wt = fit_wt_scale(qw, corrected, c)
-    assert isinstance(wt, WTScale)
     return FlatSceneScale(
         np.asarray(H, dtype=np.float64), np.asarray(coeffs), r_ref, rms_h, rms_res, wt,
         int(inl.sum()), wt.ok, wt.reason,

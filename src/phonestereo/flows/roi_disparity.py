@@ -21,10 +21,10 @@ from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
 from phonestereo.features.matching import MatchConfig, match_rectified
-from phonestereo.fixes.focus import WTScale, fit_wt_scale
+from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.coarse import coarse_disparity, equalise_blur
 from phonestereo.geometry import Rig
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification, RectifyOptions
 
 F64 = Array
@@ -398,7 +398,6 @@ def measure_roi(
     if wt_scale:
         c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
         fit = fit_wt_scale(xy, xy - np.column_stack([d, e]), c_tele, sigma_px=res.sigma_e[idx])
-        assert isinstance(fit, WTScale)
         wt = fit
         if fit.ok:
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))

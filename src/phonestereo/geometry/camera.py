@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen, require_positive
+from phonestereo.geometry.checks import Array, as_matrix, as_points, frozen, require_positive
 from phonestereo.geometry.lens import LensModel
 from phonestereo.geometry.lens_models import lens_from_dict, make_lens
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.geometry._checks import Array, as_matrix, as_points
+from phonestereo.geometry.checks import Array, as_matrix, as_points
 
 
 def skew(v: Any) -> Array:

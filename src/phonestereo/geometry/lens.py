@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 
 UNDISTORT_TOL = 1e-12
 VALID_RADIUS_MAX = 20.0  # normalised radius scanned for the valid field (87° off axis)

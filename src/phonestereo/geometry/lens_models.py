@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.geometry.lens import LensModel
 
 

@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError, PhysicsError
-from phonestereo.geometry._checks import Array, as_points
 from phonestereo.geometry.camera import Camera
+from phonestereo.geometry.checks import Array, as_points
 from phonestereo.geometry.epipolar import essential_from_pose, fundamental_from_essential
 from phonestereo.geometry.transform import Transform
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from phonestereo.geometry._checks import Array, require_positive
+from phonestereo.geometry.checks import Array, require_positive
 
 
 def depth_from_disparity(d: Any, f_px: float, baseline_m: float) -> Array:

@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from phonestereo.errors import InputError
-from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen
+from phonestereo.geometry.checks import Array, as_matrix, as_points, frozen
 
 ORTHONORMAL_TOLERANCE = 1e-6
 """Largest max |R·Rᵀ − I| accepted: real files print R with 6–9 significant digits."""

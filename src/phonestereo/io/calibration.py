@@ -354,17 +354,12 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     return calibration_from_dict(data, p.name)
 
 
-# OpenCV YAML lives in its own module (one concept per module); re-exported here (io_api.md).
-from phonestereo.io.opencv_yaml import export_opencv_yaml, import_opencv_yaml  # noqa: E402
-
 __all__ = [
     "Calibration",
     "CalibrationConditions",
     "calibration_from_dict",
     "calibration_json",
     "calibration_to_dict",
-    "export_opencv_yaml",
-    "import_opencv_yaml",
     "load_calibration",
     "save_calibration",
 ]

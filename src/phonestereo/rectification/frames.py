@@ -26,7 +26,7 @@ import numpy as np
 
 from phonestereo.errors import InputError, PhysicsError
 from phonestereo.geometry import Camera, LensModel
-from phonestereo.geometry._checks import Array, as_matrix
+from phonestereo.geometry.checks import Array, as_matrix
 
 # Smallest share of the baseline that must lie in the image plane: beyond ~60° of tilt the
 # canonical frame would look mostly sideways and the rotation-only modes see no disparity.

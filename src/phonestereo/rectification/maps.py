@@ -21,7 +21,7 @@ from scipy.interpolate import RectBivariateSpline
 
 from phonestereo.errors import InputError, ShapeError
 from phonestereo.geometry import Camera
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification.points import from_rectified
 
 INVALID = -10.0  # map value of rectified pixels with no raw source (cv2 fills them with 0)

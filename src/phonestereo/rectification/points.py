@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from phonestereo.geometry import Camera
-from phonestereo.geometry._checks import Array, as_points
+from phonestereo.geometry.checks import Array, as_points
 
 
 def project_valid(camera: Camera, points: Array) -> Array:

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from phonestereo.errors import ShapeError
 from phonestereo.geometry import Camera, Rig, depth_from_disparity
-from phonestereo.geometry._checks import Array, as_points, frozen
+from phonestereo.geometry.checks import Array, as_points, frozen
 from phonestereo.rectification import frames, maps
 from phonestereo.rectification.options import Mode, RectifyOptions, check_mode
 from phonestereo.rectification.points import from_rectified, to_rectified

@@ -17,7 +17,7 @@ import numpy as np
 
 from phonestereo.errors import InputError, PhysicsError
 from phonestereo.geometry import Camera
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.rectification.options import RectifyOptions
 from phonestereo.rectification.points import to_rectified
 

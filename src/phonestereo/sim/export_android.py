@@ -87,6 +87,8 @@ def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], 
         if c.gravity is None:
             raise InputError(f"capture '{c.id}' has no gravity to export as an accelerometer")
         acc = -STANDARD_GRAVITY * (R0.T @ np.asarray(c.gravity, dtype=np.float64))
+        if c.time_s is None:
+            raise InputError(f"capture '{c.id}' has no time_s: a Camera2 dump needs a timestamp")
         cams = {}
         for role in ("wide", "tele"):
             cid = IDS[role]

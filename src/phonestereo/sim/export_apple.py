@@ -124,6 +124,8 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
         if c.gravity is None:
             raise InputError(f"capture '{c.id}' has no gravity to export")
         g = R_BACK.T @ np.asarray(c.gravity, dtype=np.float64)
+        if c.time_s is None:
+            raise InputError(f"capture '{c.id}' has no time_s: an Apple dump needs a timestamp")
         cams = {}
         for role in ("wide", "tele"):
             shot: dict[str, Any] = {

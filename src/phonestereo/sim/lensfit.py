@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from phonestereo.geometry import Camera, make_lens
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 
 GRID = (41, 31)
 

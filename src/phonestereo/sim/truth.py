@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.geometry import Camera, Transform
-from phonestereo.geometry._checks import Array
+from phonestereo.geometry.checks import Array
 from phonestereo.sim.capture import ROLES, CaptureState, Role
 
 #: Two pixels whose round trip through the lens differs by more than this are folded-over.

@@ -1,13 +1,21 @@
-"""Helpers every chapter-3 analysis shares: figure saving, JSON cleaning, per-corner maps."""
+"""Helpers every chapter-3 analysis shares: the capture set and its rig, the captures of a
+kind, writing the JSON table, figure saving, JSON cleaning, per-corner maps."""
 
 from __future__ import annotations
 
+import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from phonestereo.errors import InputError
+from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.geometry import Rig
+from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
 
 F64 = np.ndarray
 
@@ -49,4 +57,45 @@ def json_clean(v: Any) -> Any:
     return v
 
 
-__all__ = ["json_clean", "map_panel", "save_figure"]
+def open_set(capture_set: str | Path | CaptureSet) -> tuple[CaptureSet, Rig]:
+    """The capture set (loaded and validated when a path is given) and its calibration's rig."""
+    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    return cs, load_calibration(cs.calibration_path()).rig
+
+
+def captures_of_kind(cs: CaptureSet, kind: str, analysis: str, needs: str) -> list[CaptureEntry]:
+    """The captures of ``kind``; InputError naming what ``analysis`` ``needs`` when none."""
+    caps = [c for c in cs.captures() if c.kind == kind]
+    if not caps:
+        raise InputError(
+            f"the {analysis} analysis needs {needs}; "
+            f"{cs.root} has {len(cs.captures())} capture(s), none of kind '{kind}'"
+        )
+    return caps
+
+
+def write_output(
+    name: str,
+    table: dict[str, Any],
+    figures: Sequence[Path],
+    summary: tuple[str, ...],
+    out_dir: Path,
+) -> AnalysisOutput:
+    """Write ``table`` (cleaned by :func:`json_clean`) as ``<name>.json`` (``-`` → ``_``) into
+    ``out_dir``; the :class:`AnalysisOutput` holding it, the figures and the JSON file."""
+    clean = json_clean(table)
+    path = out_dir / f"{name.replace('-', '_')}.json"
+    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
+    return AnalysisOutput(
+        name, bool(table["ok"]), table["reason"], summary, clean, (*figures, path)
+    )
+
+
+__all__ = [
+    "captures_of_kind",
+    "json_clean",
+    "map_panel",
+    "open_set",
+    "save_figure",
+    "write_output",
+]

@@ -27,7 +27,6 @@ image before/after the fix), ``distortion_radial.png`` (Figure 3-7's three panel
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -36,9 +35,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.calibration.views import BoardView, chessboard_object_points
-from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import captures_of_kind, open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -56,7 +54,7 @@ from phonestereo.fixes.lens_model_compare import (
     radial_residuals,
 )
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.io import CaptureSet, read_gray
 from phonestereo.rectification import MODES, Rectification
 
 F64 = np.ndarray
@@ -107,16 +105,13 @@ def analyze_distortion(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Measure residual distortion through e; (JSON table, plot data)."""
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
-    caps = [c for c in cs.captures() if c.kind == "verification"]
-    if not caps:
-        raise InputError(
-            "the distortion analysis needs >= 1 'verification' capture of one flat verification "
-            "chart filling the tele (tripod, heated), e.g. `phonestereo simulate refocus`; "
-            "'calibration' captures (9x6 chessboard) add the even-vs-odd lens comparison; "
-            f"{cs.root} has {len(cs.captures())} capture(s), none of kind 'verification'"
-        )
-    rig = load_calibration(cs.calibration_path()).rig
+    cs, rig = open_set(capture_set)
+    caps = captures_of_kind(
+        cs, "verification", "distortion",
+        ">= 1 'verification' capture of one flat verification chart filling the tele (tripod, "
+        "heated), e.g. `phonestereo simulate refocus`; 'calibration' captures (9x6 chessboard) "
+        "add the even-vs-odd lens comparison",
+    )  # fmt: skip
     rects = {mode: Rectification.from_rig(rig, mode) for mode in MODES}
     rect = rects[MODE]
     ms = []
@@ -333,9 +328,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``distortion.json`` and the figures into ``out_dir``."""
     tb, data = analyze_distortion(capture_set, progress=progress)
     files = write_figures(tb, data, out_dir) if tb["ok"] else []
-    path = out_dir / "distortion.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput(
-        "distortion", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files)
-    )
+    return write_output("distortion", tb, files, _summary(tb), out_dir)

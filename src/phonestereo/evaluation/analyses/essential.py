@@ -30,7 +30,6 @@ ranges per method), ``essential_pose.png`` (Figure 3-25) and ``essential_scales.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections import defaultdict
@@ -44,7 +43,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import measure_capture
 from phonestereo.fixes.essential_compare import (
@@ -54,7 +53,7 @@ from phonestereo.fixes.essential_compare import (
     essential_from_points,
 )
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
+from phonestereo.io import CaptureEntry, CaptureSet
 from phonestereo.rectification import Rectification
 
 Progress = Callable[[int, int, str], None]
@@ -161,8 +160,7 @@ def analyze_essential(
         An invalid set, or one without a refocus stack of verification captures.
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
-    rig = load_calibration(cs.calibration_path()).rig
+    cs, rig = open_set(capture_set)
     rect = Rectification.from_rig(rig, "canonical")
     stacks, rows = measure_stacks(cs, rect, "essential", progress)
     base = {"analysis": "essential", "capture_set": str(cs.root), "captures": rows}
@@ -311,8 +309,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``essential.json`` and the figures into ``out_dir``."""
     tb = analyze_essential(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if tb["ok"] else []
-    tb.pop("_fig", None)
-    path = out_dir / "essential.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput("essential", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files))
+    return write_output("essential", tb, files, _summary(tb), out_dir)

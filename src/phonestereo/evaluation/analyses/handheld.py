@@ -20,7 +20,6 @@ relative errors before / after, per stack).
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,13 +29,13 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.analyses.essential import MIN_ATTEMPTS, measure_stacks
 from phonestereo.fixes.essential_compare import MIN_POINTS, shared_points
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureSet, load_calibration, load_capture_set
+from phonestereo.io import CaptureSet
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -98,8 +97,7 @@ def analyze_handheld(
         An invalid set, or one without a refocus stack of verification captures.
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
-    rig = load_calibration(cs.calibration_path()).rig
+    cs, rig = open_set(capture_set)
     rect = Rectification.from_rig(rig, "canonical")
     stacks, rows = measure_stacks(cs, rect, "handheld", progress)
     groups: dict[str, Any] = {}
@@ -184,12 +182,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``handheld.json`` and the figure into ``out_dir``."""
     tb = analyze_handheld(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if tb["ok"] else []
-    for v in tb["groups"].values():
-        for when in ("before", "after"):
-            if when in v:
-                v[when].pop("_ranges", None)
-                v[when].pop("_relative", None)
-    path = out_dir / "handheld.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput("handheld", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files))
+    return write_output("handheld", tb, files, _summary(tb), out_dir)

@@ -19,7 +19,6 @@ when the module reports temperature, ``heating_temperature.png`` (d vs temperatu
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +29,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -47,7 +46,7 @@ from phonestereo.fixes.heating import (
     fit_drift_curve,
 )
 from phonestereo.fixes.warmup import WarmupGate
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
+from phonestereo.io import CaptureEntry, CaptureSet
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -146,9 +145,9 @@ def analyze_heating(
         An invalid set, or one lacking the captures the analysis needs (message names them).
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    cs, rig = open_set(capture_set)
     caps = _check_needs(cs)
-    rect = Rectification.from_rig(load_calibration(cs.calibration_path()).rig, "canonical")
+    rect = Rectification.from_rig(rig, "canonical")
     ms = []
     for i, c in enumerate(caps):
         ms.append(measure_capture(cs, c, rect, min_corners=MIN_SAMPLES))
@@ -331,8 +330,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``heating.json`` and the figures into ``out_dir``."""
     tb = analyze_heating(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if "fit_disparity" in tb else []
-    tb.pop("_per_corner_d_px", None)
-    path = out_dir / "heating.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput("heating", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files))
+    return write_output("heating", tb, files, _summary(tb), out_dir)

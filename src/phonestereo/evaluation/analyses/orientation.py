@@ -24,7 +24,6 @@ disparity of every capture coloured by bucket, and the per-bucket offsets) and
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -35,7 +34,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -45,7 +44,7 @@ from phonestereo.evaluation.chart_ruler import (
     shared_keys,
 )
 from phonestereo.fixes.orientation import OrientationOffsets, capture_bucket
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
+from phonestereo.io import CaptureEntry, CaptureSet
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -116,9 +115,9 @@ def analyze_orientation(
         An invalid set, or one without verification captures in two orientations.
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    cs, rig = open_set(capture_set)
     caps, buckets = _check_needs(cs)
-    rect = Rectification.from_rig(load_calibration(cs.calibration_path()).rig, "canonical")
+    rect = Rectification.from_rig(rig, "canonical")
     ms = []
     for i, c in enumerate(caps):
         ms.append(measure_capture(cs, c, rect))
@@ -258,11 +257,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``orientation.json`` and the figures into ``out_dir``."""
     tb = analyze_orientation(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if tb["ok"] else []
-    for k in ("_table", "_q_wide", "_buckets"):
-        tb.pop(k, None)
-    path = out_dir / "orientation.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput(
-        "orientation", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files)
-    )
+    return write_output("orientation", tb, files, _summary(tb), out_dir)

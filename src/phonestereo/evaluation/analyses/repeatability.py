@@ -21,7 +21,6 @@ the fitted per-attempt scales are compared with the true focal-length ratios. Ou
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -32,11 +31,11 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import json_clean, map_panel, save_figure
+from phonestereo.evaluation.analyses._common import map_panel, open_set, save_figure, write_output
 from phonestereo.evaluation.chart_ruler import corner_keys, measure_capture, shared_keys
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.fixes.refocus import averaging_trials, detect_focus_failures, sharpness
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.io import CaptureEntry, CaptureSet, read_gray
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -120,9 +119,8 @@ def analyze_repeatability(
         An invalid set, or one without a refocus stack of verification captures.
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    cs, rig = open_set(capture_set)
     caps = stack_entries(cs, "repeatability", "one static verification chart")
-    rig = load_calibration(cs.calibration_path()).rig
     rect = Rectification.from_rig(rig, "canonical")
     ms = []
     for i, entry in enumerate(caps):
@@ -279,10 +277,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``repeatability.json`` and the figures into ``out_dir``."""
     tb = analyze_repeatability(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if tb["ok"] else []
-    clean = json_clean(tb)
-    path = out_dir / "repeatability.json"
-    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput(
-        "repeatability", bool(tb["ok"]), tb["reason"], _summary(tb), clean, tuple(files)
-    )
+    return write_output("repeatability", tb, files, _summary(tb), out_dir)

@@ -22,7 +22,6 @@ corner over the image, before and after: Figure 3-10) and ``translation_e_by_dep
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -32,9 +31,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.charts.verification import VerificationChart
-from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
-from phonestereo.evaluation.analyses._common import json_clean as _clean
+from phonestereo.evaluation.analyses._common import captures_of_kind, open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import corner_keys, match_detections, true_corners
 from phonestereo.features.verification import ChartDetection, detect_verification_chart
@@ -46,7 +44,7 @@ from phonestereo.fixes.translation import (
     predicted_nondisparity_px,
 )
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.io import CaptureEntry, CaptureSet, read_gray
 from phonestereo.rectification import MODES, Rectification
 
 F64 = np.ndarray
@@ -135,16 +133,13 @@ def analyze_translation(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Measure the depth dependence of e per rectification mode; (JSON table, plot data)."""
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
-    caps = [c for c in cs.captures() if c.kind == "verification"]
-    if not caps:
-        raise InputError(
-            "the translation analysis needs >= 1 'verification' capture showing two "
-            "verification charts at two depths (a 10x8-square 18 mm chart near, the standard "
-            "chart far; tripod), e.g. `phonestereo simulate dual-depth`; "
-            f"{cs.root} has {len(cs.captures())} capture(s), none of kind 'verification'"
-        )
-    rig = load_calibration(cs.calibration_path()).rig
+    cs, rig = open_set(capture_set)
+    caps = captures_of_kind(
+        cs, "verification", "translation",
+        ">= 1 'verification' capture showing two verification charts at two depths (a "
+        "10x8-square 18 mm chart near, the standard chart far; tripod), e.g. "
+        "`phonestereo simulate dual-depth`",
+    )  # fmt: skip
     ms = []
     for i, c in enumerate(caps):
         ms.append(_measure(cs, c))
@@ -277,9 +272,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``translation.json`` and the figures into ``out_dir``."""
     tb, data = analyze_translation(capture_set, progress=progress)
     files = write_figures(tb, data, out_dir) if tb["ok"] else []
-    path = out_dir / "translation.json"
-    path.write_text(json.dumps(_clean(tb), indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput(
-        "translation", bool(tb["ok"]), tb["reason"], _summary(tb), tb, tuple(files)
-    )
+    return write_output("translation", tb, files, _summary(tb), out_dir)

@@ -6,7 +6,7 @@ ruler; with two charts (``dual-depth``) the first chart found is masked out (its
 grown by 20 %) and the image searched again, so each chart is one disparity cluster (near
 first). Per attempt: focus-fail detection (sharpness of the ROI against the stack's median,
 :mod:`phonestereo.fixes.refocus`); the W-T scale and offset minimising the spread of e
-(:func:`~phonestereo.fixes.focus.fit_wt_scale`), over all points and per chart; for one flat
+(:func:`~phonestereo.fixes.wt_scale.fit_wt_scale`), over all points and per chart; for one flat
 chart also the homography → residual distortion → scale method. Over the stack, per chart:
 the chart's disparity range (all corners, all attempts) and the per-corner range, before and
 after the scale fix (Figures 3-14 to 3-16), and Table 2: a disparity fix learned at the chart's
@@ -20,7 +20,6 @@ scales, compared per attempt. Outputs: ``wt_scale.json``, ``wt_scale_corner_rang
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,19 +31,20 @@ from matplotlib.figure import Figure
 from scipy.spatial import cKDTree
 
 from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses._common import open_set, write_output
 from phonestereo.evaluation.analyses.repeatability import (
     Progress,
     focus_check,
-    json_clean,
     map_panel,
     save_figure,
     stack_entries,
 )
 from phonestereo.evaluation.chart_ruler import corner_keys, match_detections
 from phonestereo.features.verification import detect_verification_chart
-from phonestereo.fixes.focus import MIN_POINTS, WTScale, fit_wt_scale
+from phonestereo.fixes.focus import MIN_POINTS
 from phonestereo.fixes.refocus import cluster_disparities, flat_scene_scale
-from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set, read_gray
+from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
+from phonestereo.io import CaptureEntry, CaptureSet, read_gray
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
@@ -96,7 +96,6 @@ def measure_charts(
 
 def _fit(qw: F64, qt: F64, c: F64) -> WTScale:
     f = fit_wt_scale(qw, qt, c)
-    assert isinstance(f, WTScale)
     return f
 
 
@@ -228,9 +227,9 @@ def analyze_wt_scale(
         An invalid set, or one without a refocus stack of verification captures.
     """
     t0 = time.perf_counter()
-    cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
+    cs, rig = open_set(capture_set)
     caps = stack_entries(cs, "wt-scale", "one or two static verification charts")
-    rect = Rectification.from_rig(load_calibration(cs.calibration_path()).rig, "canonical")
+    rect = Rectification.from_rig(rig, "canonical")
     c = np.asarray(rect.tele_rect.K[:2, 2], dtype=np.float64)
     rows = []
     for i, entry in enumerate(caps):
@@ -338,10 +337,4 @@ def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> A
     """Registry entry: analyse, write ``wt_scale.json`` and the figures into ``out_dir``."""
     tb = analyze_wt_scale(capture_set, progress=progress)
     files = write_figures(tb, out_dir) if tb["ok"] else []
-    clean = json_clean(tb)
-    path = out_dir / "wt_scale.json"
-    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
-    files.append(path)
-    return AnalysisOutput(
-        "wt-scale", bool(tb["ok"]), tb["reason"], _summary(tb), clean, tuple(files)
-    )
+    return write_output("wt-scale", tb, files, _summary(tb), out_dir)

@@ -314,6 +314,8 @@ def read_color(path: str | os.PathLike[str]) -> U8:
         Missing file or not an image OpenCV decodes.
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
     if not p.is_file():
         raise InputError(f"image file not found: '{p}'; check the path")
     data = np.fromfile(p, dtype=np.uint8)

@@ -1,4 +1,5 @@
-"""Shape and value checks shared by the geometry modules (kornia-style, typed errors)."""
+"""Shape and value checks shared by every layer (kornia-style, typed errors): points,
+matrices, positive scalars, read-only arrays. Public: any module may use them."""
 
 from __future__ import annotations
 
