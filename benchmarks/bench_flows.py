@@ -225,14 +225,14 @@ def _window(
 ) -> tuple[Rectification, tuple[int, int, int, int], int]:
     """The rectified window ``measure_roi`` works in: (window, rectified box, d_max)."""
     rc = cfg.roi
-    ref = reference_rectification(rig, rc.mode)
+    ref = reference_rectification(rig, cfg.mode)
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / rc.z_min_m)) + 2
     x, y, w, h = roi
     cx, cy, w2, h2 = x + w / 2, y + h / 2, w * rc.expand, h * rc.expand
     x0, y0 = max(0, round(cx - w2 / 2)), max(0, round(cy - h2 / 2))
     x1, y1 = min(rig.wide.size[0], round(cx + w2 / 2)), min(rig.wide.size[1], round(cy + h2 / 2))
     big = (x0, y0, x1 - x0, y1 - y0)
-    win = Rectification.from_rig(rig, rc.mode, RectifyOptions(roi=big, margin_px=d_max + 12))
+    win = Rectification.from_rig(rig, cfg.mode, RectifyOptions(roi=big, margin_px=d_max + 12))
     q = win.points_wide(roi_grid(big, 3))
     lo, hi = np.floor(q.min(0)).astype(int), np.ceil(q.max(0)).astype(int)
     rw, rh = win.wide_rect.size

@@ -36,6 +36,30 @@ def test_no_pipeline_module_reads_ground_truth() -> None:
     assert not offenders, f"pipeline modules mention ground truth: {offenders}"
 
 
+def _calls(attr: str) -> list[str]:
+    """Modules of src/ that call ``<anything>.attr(...)`` or ``attr(...)``."""
+    import ast
+
+    found = []
+    for path in SRC.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                f = node.func
+                name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+                if name == attr:
+                    found.append(str(path.relative_to(SRC)))
+    return sorted(set(found))
+
+
+def test_one_learning_path() -> None:
+    # Issue #19: observations are made only by the learning flow (gates, focus calibration,
+    # W-T scale, store context). A second path that writes the store or runs the landmark
+    # block on its own (as learning/learn.py's learn_capture_set did) fails here.
+    assert _calls("add_capture") == ["flows/learning.py"]
+    assert _calls("learn_capture") == ["flows/learning.py"]
+    assert _calls("learn_face_capture") == ["flows/learning.py"]
+
+
 def test_no_import_cycle_between_phonestereo_modules() -> None:
     import grimp  # import-linter's graph builder
 

@@ -29,3 +29,8 @@ class ConvergenceError(PhoneStereoError, RuntimeError):
 
 class StoreError(PhoneStereoError, RuntimeError):
     """The fix store cannot be opened, migrated or written; nothing learned is lost."""
+
+
+class ContextError(StoreError):
+    """A fix store was learned under another calibration, lens model, rectification mode or
+    flow configuration than the one given; the message names the field that differs."""

@@ -148,7 +148,7 @@ def test_v1_store_is_migrated_with_backup(tmp_path: Path) -> None:
     path = tmp_path / "old.db"
     _write_v1(path)
     with FixStore(path) as st:
-        assert st.schema_version == 2 and st.backup_path == tmp_path / "old.db.v1.bak"
+        assert st.schema_version == SCHEMA_VERSION and st.backup_path == tmp_path / "old.db.v1.bak"
         old = st.observations()
         assert old.shape == (2,) and set(old["source"]) == {"unknown"}
         assert np.isnan(old["sigma_px"]).all() and np.isnan(old["temperature_c"]).all()

@@ -11,6 +11,7 @@ import phonestereo.cli.store  # noqa: F401  (registers `store` until cli/__init_
 from phonestereo.cli.app import app
 from phonestereo.learning.observation import Observation
 from phonestereo.learning.store import FixStore
+from phonestereo.learning.store_schema import SCHEMA_VERSION
 
 runner = CliRunner()
 
@@ -40,7 +41,7 @@ def test_stats_text_and_json(tmp_path: Path) -> None:
     res = runner.invoke(app, ["store", "stats", str(path), "--json"])
     doc = json.loads(res.output)
     assert doc["n_observations"] == 10 and doc["by_orientation"]["landscape"]["n"] == 6
-    assert doc["schema_version"] == 2 and doc["integrity"] == "ok"
+    assert doc["schema_version"] == SCHEMA_VERSION and doc["integrity"] == "ok"
 
 
 def test_export_and_vacuum(tmp_path: Path) -> None:

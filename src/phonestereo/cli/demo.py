@@ -22,7 +22,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from phonestereo.cli.app import app
 from phonestereo.cli.depth import clean, print_bench
+from phonestereo.cli.flow_options import CONFIG_OPTION
+from phonestereo.errors import InputError
 from phonestereo.evaluation.bench import run_bench
+from phonestereo.flows.config_file import load_flow_config
 from phonestereo.report.bench_report import write_report
 from phonestereo.sim.module import load_module
 from phonestereo.sim.scenarios import BenchConfig, LearningConfig, VerificationConfig, plan_scenario
@@ -48,6 +51,7 @@ def demo(
     ] = False,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     workers: Annotated[int, typer.Option(help="Rendering processes.")] = 0,
+    config: CONFIG_OPTION = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
     roi_jitter: Annotated[
         float,
@@ -66,13 +70,18 @@ def demo(
     correction over the sensor; with --full the ablation table) into --out.
     """
     t0 = time.perf_counter()
+    try:
+        cfg = load_flow_config(config)
+    except InputError as exc:
+        Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from exc
     spec = load_module(module)
-    config = BenchConfig() if full else QUICK
+    bench = BenchConfig() if full else QUICK
     if roi_jitter > 0:
-        config = replace(
-            config, verification=replace(config.verification, roi_jitter=float(roi_jitter))
+        bench = replace(
+            bench, verification=replace(bench.verification, roi_jitter=float(roi_jitter))
         )
-    plan = plan_scenario("thesis-bench", spec, seed, config=config)
+    plan = plan_scenario("thesis-bench", spec, seed, config=bench)
     console = Console(stderr=True)
     n_workers = workers or min(2, os.cpu_count() or 1)
     cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -87,7 +96,7 @@ def demo(
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(task, description=stage, completed=done, total=total)
 
-        res = run_bench(out, ablations=full, lookups=full, progress=progress)
+        res = run_bench(out, cfg, ablations=full, lookups=full, progress=progress)
     res["module"] = spec.name
     report = write_report(res, out / "report.html", title=f"phonestereo demo: {spec.name}")
     res["report"] = str(report)

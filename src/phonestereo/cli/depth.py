@@ -8,20 +8,23 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.flow_options import CONFIG_OPTION
 from phonestereo.errors import InputError, PhysicsError, StoreError
 from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
 from phonestereo.features.match_input import parse_roi
 from phonestereo.flows import application
-from phonestereo.flows.config import Corrector, FlowConfig
-from phonestereo.flows.learning import stack_corrections
+from phonestereo.flows.config import Corrector
+from phonestereo.flows.config_file import load_flow_config
+from phonestereo.flows.learning import stack_corrections, store_context
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
-from phonestereo.learning.store import FixStore
+from phonestereo.learning.store_open import open_for_reading
 
 
 def _bar(label: str, console: Console, disable: bool) -> Progress:
@@ -40,6 +43,7 @@ def depth(
     roi: Annotated[
         str | None, typer.Option("--roi", help="x,y,w,h in raw wide pixels (default: manifest).")
     ] = None,
+    config: CONFIG_OPTION = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
 ) -> None:
     """Metric depth of the ROI of each capture, with its σ (thesis Fig. 4-2).
@@ -48,14 +52,17 @@ def depth(
     ROI matched into the tele → focus fix of the refocus stack → majority disparity, ROI
     expansion, majority again → W-T scale → the learned correction from STORE → depth. A
     capture that does not pass says which gate or block stopped it and why — never a silent
-    number. Exit code 0 when every capture got a depth, 1 when some did not, 2 on bad input.
+    number. Only the store's observations learned under this calibration, lens model,
+    rectification mode and flow config (--config) are applied; a store learned under another
+    is refused, naming the field that differs. The store is only read. Exit code 0 when every
+    capture got a depth, 1 when some did not, 2 on bad input.
 
     Example: phonestereo depth runs/verification --calibration calibration.json --store
     fixes.sqlite --json
     """
-    console = Console(stderr=True)
-    cfg = FlowConfig()
+    console = Console(stderr=True, soft_wrap=True)
     try:
+        cfg = load_flow_config(config)
         cs = load_capture_set(capture_set)
         cal = load_calibration(calibration)
         if not Path(store).is_file():
@@ -63,8 +70,11 @@ def depth(
                 f"fix store {store} does not exist; learn one with `phonestereo learn "
                 "CAPTURE_SET --calibration FILE --store FILE` first"
             )
-        with FixStore(store) as fs:
-            obs = fs.observations()
+        with open_for_reading(store) as fs:
+            choice = fs.context_for_applying(store_context(cfg, cal.rig))
+            obs = fs.observations(context_id=-1 if choice.id is None else choice.id)
+        if choice.warning:
+            console.print(f"[yellow]warning:[/yellow] {escape(choice.warning)}")
         corrector = Corrector(obs, cfg) if len(obs) else None
         entries = [c for c in cs.captures() if c.kind != "face"]
         if capture is not None:
@@ -87,10 +97,15 @@ def depth(
                 results.append(application.run(cfg, inputs))
                 bar.advance(task)
     except (InputError, StoreError, PhysicsError) as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        console.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from exc
     if as_json:
-        typer.echo(json.dumps({"results": [r.to_dict() for r in results]}, indent=1))
+        doc = {
+            "results": [r.to_dict() for r in results],
+            "config": cfg.to_dict(),
+            "store": {"path": str(store), "context_id": choice.id, "warning": choice.warning},
+        }
+        typer.echo(json.dumps(doc, indent=1))
     else:
         table = Table(title=f"depth of the ROI ({cs.root})")
         for col in ("capture", "depth (m)", "σ (m)", "d (px)", "correction (px)", "gate / why"):
@@ -162,6 +177,15 @@ def evaluate(
         bool, typer.Option(help="Also compare the lookup strategies of Figure 3-31.")
     ] = False,
     report: Annotated[Path | None, typer.Option(help="Write an HTML report here.")] = None,
+    store: Annotated[
+        Path | None,
+        typer.Option(
+            "--store",
+            help="Learn into this fix store (refused when it was learned under another "
+            "calibration or --config) and apply its observations. Default: in memory.",
+        ),
+    ] = None,
+    config: CONFIG_OPTION = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
 ) -> None:
     """Score every stage of the flows against ground truth (the thesis bench, docs/architecture.md).
@@ -170,17 +194,25 @@ def evaluate(
     relative depth error per distance for naive Z = f·B/d, the fixes without the learned
     correction, the full flow and the Cramér–Rao floor, plus how often |Z − Z_true| ≤ σ.
     """
-    console = Console(stderr=True)
+    console = Console(stderr=True, soft_wrap=True)
     try:
+        cfg = load_flow_config(config)
         with _bar("evaluate", console, as_json) as bar:
             task = bar.add_task("evaluate", total=None)
 
             def progress(stage: str, done: int, total: int) -> None:
                 bar.update(task, completed=done, total=total, description=stage)
 
-            res = run_bench(capture_set, ablations=ablations, lookups=lookups, progress=progress)
+            res = run_bench(
+                capture_set,
+                cfg,
+                ablations=ablations,
+                lookups=lookups,
+                store_path=store,
+                progress=progress,
+            )
     except (InputError, StoreError, PhysicsError) as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        console.print(f"[red]error:[/red] {escape(str(exc))}")
         raise typer.Exit(2) from exc
     if report is not None:
         from phonestereo.report.bench_report import write_report

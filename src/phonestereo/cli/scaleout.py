@@ -17,6 +17,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.flow_options import CONFIG_OPTION
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -70,6 +71,7 @@ def batch(
         list[str] | None,
         typer.Option("--param", help="Command parameter KEY=VALUE (repeatable)."),
     ] = None,
+    config: CONFIG_OPTION = None,
     scheduler: SchedulerOpt = None,
     workers: WorkersOpt = 2,
     retry_failed: Annotated[
@@ -88,6 +90,13 @@ def batch(
     try:
         cmd = get_command(command)
         params = parse_params(cmd, param)
+        if config is not None:
+            if "config" not in cmd.params:
+                raise InputError(f"batch {command} does not run a flow: --config is for learn")
+            from phonestereo.flows.config_file import load_flow_config
+
+            load_flow_config(config)  # refuse a bad file before any task starts
+            params["config"] = str(config.resolve())
         folders = expand_inputs(inputs)
         if scheduler is not None:
             check_address(scheduler)

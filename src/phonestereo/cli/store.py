@@ -8,7 +8,6 @@ write is opened read-only. Errors (damaged file, bad path) print the store's mes
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Annotated
 
@@ -19,6 +18,7 @@ from rich.markup import escape
 from phonestereo.cli.app import app
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
+from phonestereo.learning.store_open import open_for_reading
 
 store_app = typer.Typer(
     help="The fix store of learned disparity corrections: stats, export, vacuum.",
@@ -38,8 +38,7 @@ def _open(path: Path, write: bool = False) -> FixStore:
     """Open an existing store (never create one from an inspection command)."""
     if not path.exists():
         raise StoreError(f"the fix store '{path}' does not exist; check the path")
-    readonly = not write and not os.access(path, os.W_OK)
-    return FixStore(path, readonly=readonly)
+    return FixStore(path) if write else open_for_reading(path)
 
 
 def _kb(n: int) -> str:
@@ -69,6 +68,24 @@ def format_stats(s: StoreStats) -> str:
     ]
     if spans:
         lines.append("  " + ", ".join(spans))
+    for c in s.contexts:
+        if c["recorded"]:
+            what = (
+                f"calibration {c['calibration_sha256']}, lens {c['lens_model']}, "
+                f"{c['rectification_mode']}, flow config {c['flow_config_sha256']}"
+            )
+        else:
+            what = "not recorded (learned before schema v3)"
+        lines.append(
+            f"  context #{c['id']}: {what}; {c['n_sets']} set(s), {c['n_captures']} captures, "
+            f"{c['n_observations']} observations"
+        )
+        for st in (x for x in s.sets if x["context_id"] == c["id"]):
+            where = f" {st['folder']}" if st["folder"] else ""
+            lines.append(
+                f"    set {st['fingerprint']}{where}: {st['n_captures']} captures, "
+                f"{st['n_observations']} observations"
+            )
     return "\n".join(lines)
 
 
@@ -77,7 +94,9 @@ def stats(
     file: Annotated[Path, _FILE],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Counts per orientation bucket, focus group and source; value ranges; integrity."""
+    """Counts per orientation bucket, focus group and source; value ranges; the contexts
+    (calibration, lens model, rectification mode, flow config) and the capture sets learned
+    under each; integrity. Never writes to a file that is not a fix store."""
     try:
         with _open(file) as st:
             s = st.stats()

@@ -14,7 +14,9 @@ Commands (``--param KEY=VALUE`` sets their parameters):
 ``calibrate``  chessboard captures of the set → ``calibration.json`` (stereo, thesis §1.3.2);
                params ``board`` (inner corners, ``9x6``), ``square_m``, ``model``.
 ``learn``      face captures → a fix store ``fixes.sqlite`` on the set's factory calibration
-               (thesis §4.1.3); param ``ipd_mm``.
+               (thesis §4.1.3, the learning flow :func:`phonestereo.flows.learning.run`);
+               params ``ipd_mm``, ``population`` (real faces: true/false) and ``config``
+               (a ``--config`` FLOW.json; ``phonestereo batch --config`` sets it).
 ``naive``      simulated sets only: naive relative depth error of the verification captures
                from the ground truth's true pixels and the factory calibration (thesis §3).
 ``depth``, ``evaluate``  not available yet (they need the Phase 0 flows, issue #7).
@@ -91,16 +93,28 @@ def _calibrate(folder: Path, work: Path, params: dict[str, Any]) -> dict[str, An
 
 
 def _learn(folder: Path, work: Path, params: dict[str, Any]) -> dict[str, Any]:
-    from phonestereo.io import load_capture_set
-    from phonestereo.learning.learn import learn_capture_set
+    from phonestereo.flows.config_file import load_flow_config
+    from phonestereo.flows.learning import IpdMode, run
+    from phonestereo.io import load_calibration, load_capture_set
+    from phonestereo.learning.provenance import canonical_json
+    from phonestereo.learning.store import FixStore
 
+    cfg = load_flow_config(params["config"] or None)
+    pop = str(params["population"]).strip().lower() in ("1", "true", "yes", "on")
+    ipd = IpdMode.population() if pop else IpdMode.chart(float(params["ipd_mm"]))
     cs = load_capture_set(folder)
+    cal = load_calibration(cs.calibration_path())
     work.mkdir(parents=True, exist_ok=True)
-    summary = learn_capture_set(
-        cs, cs.calibration_path(), work / "fixes.sqlite", ipd_mm=float(params["ipd_mm"])
-    )
-    d = summary.to_dict()
-    return {k: d[k] for k in ("n_captures", "n_learned", "n_observations", "seconds_per_capture")}
+    with FixStore(work / "fixes.sqlite") as store:
+        res = run(cfg, cs, cal, store, ipd=ipd)
+    d = res.to_dict()
+    n = max(d["n_captures"], 1)
+    return {
+        **{k: d[k] for k in ("n_captures", "n_learned", "n_observations", "set_fingerprint")},
+        "seconds_per_capture": round(res.seconds / n, 4),
+        "ipd": ipd.kind,
+        "flow_config": canonical_json(cfg.to_dict()),
+    }
 
 
 def _naive(folder: Path, work: Path, params: dict[str, Any]) -> dict[str, Any]:
@@ -151,7 +165,12 @@ COMMANDS: dict[str, BatchCommand] = {
             _calibrate,
             {"board": "9x6", "square_m": 0.02, "model": "opencv5"},
         ),
-        BatchCommand("learn", "face captures → fixes.sqlite", _learn, {"ipd_mm": 63.0}),
+        BatchCommand(
+            "learn",
+            "face captures → fixes.sqlite",
+            _learn,
+            {"ipd_mm": 63.0, "population": "false", "config": ""},
+        ),
         BatchCommand("naive", "naive depth error of a simulated set", _naive),
         BatchCommand("depth", "depth of the ROIs (application phase)", None, why="issue #7"),
         BatchCommand("evaluate", "full-flow error against ground truth", None, why="issue #7"),

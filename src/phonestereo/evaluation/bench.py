@@ -118,7 +118,7 @@ def learn_and_apply(
         progress=None if progress is None else (lambda k, n, _id: progress("learning", k, n)),
     )  # fmt: skip
     obs = (
-        store.observations()
+        store.observations(context_id=lr.context_id)  # only this calibration's and config's
         if store is not None
         else [o for c in lr.captures for o in c.observations]
     )

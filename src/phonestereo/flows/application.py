@@ -138,7 +138,16 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     if ref is None or ref.mode != config.mode:
         ref = reference_rectification(inputs.calibration.rig, config.mode)
     box = (int(roi[0]), int(roi[1]), int(roi[2]), int(roi[3]))
-    m = measure_roi(rig, inputs.image_wide, inputs.image_tele, box, config.roi, ref)
+    m = measure_roi(
+        rig,
+        inputs.image_wide,
+        inputs.image_tele,
+        box,
+        config.roi,
+        ref,
+        mode=config.mode,
+        wt_scale=config.wt_scale,
+    )
     stages["measure"] = {"counts": m.counts, "ok": m.ok, "reason": m.reason}
     if m.wt is not None:
         stages["wt_scale"] = m.wt.to_dict()

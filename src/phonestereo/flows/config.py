@@ -7,7 +7,7 @@ table of the bench switches them off one at a time).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,10 @@ class FlowConfig:
     Attributes
     ----------
     warmup_s : float
-        Heated gate: seconds since the camera started (thesis: ~3 min, §3.1).
+        Heated gate: seconds since the camera started (thesis: ~3 min, §3.1). The default
+        180 s is tuned to the simulator presets' heating time constant τ = 70 s: 180 s ≈ 2.6 τ,
+        when 92 % of the warm-up drift has happened. A phone that heats more slowly needs
+        about 2.6 × its own τ (set it with ``--config``; docs/flow-config.md).
     heating_gate, focus_calibration, wt_scale, canonical, orientation_buckets,
     learned_correction : bool
         The fixes (all on by default): the warm-up gate (§3.1), the refocus-stack focus
@@ -63,6 +66,8 @@ class FlowConfig:
         The extrapolation gate: a depth whose σ/Z exceeds this (the capture lies beyond what
         was learned) is gated with the reason instead of answered.
     roi : RoiConfig
+        The ROI measurement's parameters. Its rectification mode and W-T switch are not in
+        it: they are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
     """
 
     warmup_s: float = 180.0
@@ -84,8 +89,10 @@ class FlowConfig:
             raise InputError(f"unknown lookup {self.lookup!r}; choose one of {list(LOOKUPS)}")
         if not self.warmup_s >= 0:
             raise InputError(f"warmup_s must be >= 0 seconds, got {self.warmup_s}")
-        roi = replace(self.roi, mode=self.mode, wt_scale=self.wt_scale)
-        object.__setattr__(self, "roi", roi)
+        if not isinstance(self.roi, RoiConfig):
+            raise InputError(f"roi must be a RoiConfig, got {type(self.roi).__name__}")
+        if not 0 <= int(self.field_max_degree) <= 3 or self.min_observations < 0:
+            raise InputError("field_max_degree must be 0..3 and min_observations >= 0")
 
     @property
     def mode(self) -> str:
@@ -104,13 +111,21 @@ class FlowConfig:
         return replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary."""
-        return {
-            "warmup_s": self.warmup_s, "lookup": self.lookup,
-            "min_observations": self.min_observations, "mode": self.mode,
-            **{f: getattr(self, f) for f in FIXES},
-        }  # fmt: skip
+        """Every knob, nested as a ``--config`` file writes them, plus the derived ``mode``
+        (recorded in every result JSON)."""
+        return {**asdict(self), "mode": self.mode}
 
+    def context_dict(self) -> dict[str, Any]:
+        """The knobs that change what is *learned* (every knob but :data:`APPLY_ONLY`): the
+        flow-config part of a fix store's context (:mod:`phonestereo.learning.provenance`)."""
+        d = asdict(self)
+        for k in APPLY_ONLY:
+            d.pop(k)
+        return d
+
+
+#: Knobs used only when applying a store: changing them does not invalidate what was learned.
+APPLY_ONLY = ("learned_correction", "lookup", "min_observations", "field_max_degree")
 
 ALL_BUCKETS = "all"
 
@@ -237,4 +252,4 @@ class Corrector:
         return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason), parts
 
 
-__all__ = ["ALL_BUCKETS", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]
+__all__ = ["ALL_BUCKETS", "APPLY_ONLY", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]

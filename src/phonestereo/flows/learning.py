@@ -6,111 +6,94 @@ Blocks per face capture, in order: **gates** (heated, fixed focus, orientation;
 (eq. 11) → **landmark disparity** (:func:`~phonestereo.learning.learn.learn_capture`) →
 **W-T scale** over the face chart's texture (§3.5.1, the same block as the application phase,
 so learned and applied disparities share one convention) → **observations into the fix
-store**, one transaction per capture. Captures that do not pass are skipped with the reason.
+store**, one transaction per capture, under the store's context for this calibration and
+flow configuration (:mod:`~phonestereo.learning.store_contexts`) and keyed by the capture
+set's fingerprint. Captures that do not pass are skipped with the reason.
+
+This is the only way observations are made (``learn``, ``batch learn`` and ``evaluate``
+alike; ``tests/test_architecture.py`` fails if another module writes to the store). The
+face depths come from an :class:`IpdMode`: a face chart of known IPD (all faces on one
+plane) or real faces of unknown IPD (the population prior, each head on its own).
 """
 
 from __future__ import annotations
 
-import hashlib
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
-from phonestereo.features.landmarks.base import FaceResult, TeleGuide, guided_pair
+from phonestereo.features.landmarks import LandmarkBackend
 from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_backend
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
 from phonestereo.flows.gates import Gate, capture_gates, first_failed
 from phonestereo.flows.roi_disparity import measure_roi, reference_rectification, tele_view_box
+from phonestereo.geometry import Rig
 from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
+from phonestereo.io.fingerprint import capture_set_fingerprint
+from phonestereo.learning.ipd import IpdPrior
 from phonestereo.learning.learn import learn_capture
 from phonestereo.learning.observation import Observation
+from phonestereo.learning.provenance import StoreContext
 from phonestereo.learning.store import FixStore
 from phonestereo.rectification import Rectification
 
 Progress = Callable[[int, int, str], None]
 
 
-class CachedBackend(LandmarkBackend):
-    """A landmark backend that remembers its answers per image content (for ablations that
-    re-learn the same captures under other switches: landmarks do not depend on them)."""
+@dataclass(frozen=True)
+class IpdMode:
+    """Where the faces' depths come from (thesis §3.6, eq. 11).
 
-    name = "cached"
-
-    def __init__(self, backend: LandmarkBackend) -> None:
-        self.backend = backend
-        self._cache: dict[str, FaceResult] = {}
-        self._pairs: dict[str, tuple[FaceResult, FaceResult]] = {}
-
-    @staticmethod
-    def _key(image: Any) -> str:
-        a = np.ascontiguousarray(np.asarray(image))
-        return f"{a.shape}{a.dtype}" + hashlib.blake2b(a.data, digest_size=16).hexdigest()
-
-    def detect(self, image: Any) -> FaceResult:
-        key = self._key(image)
-        if key not in self._cache:
-            self._cache[key] = self.backend.detect(image)
-        return self._cache[key]
-
-    def detect_many(self, images: Iterable[Any]) -> list[FaceResult]:
-        return [self.detect(im) for im in images]
-
-    def detect_pair(
-        self, wide: Any, tele: Any, guide: TeleGuide | None = None
-    ) -> tuple[FaceResult, FaceResult]:
-        key = self._key(wide) + self._key(tele) + ("" if guide is None else guide.key)
-        if key not in self._pairs:
-            self._pairs[key] = self.backend.detect_pair(wide, tele, guide)
-        return self._pairs[key]
-
-
-class PairBackend(LandmarkBackend):
-    """One backend for the wide image and another for the tele of a ``detect_many([wide,
-    tele])`` or :meth:`detect_pair` call.
-
-    With a guide (:class:`~phonestereo.learning.pair_guide.WideToTeleGuide`) the tele is
-    not searched: it is measured only where the wide's faces map to.
+    Attributes
+    ----------
+    kind : {"chart", "population"}
+        A printed face chart (every face the same known IPD, on one plane), or real faces
+        of unknown IPD (the prior's mean IPD, each head's own yaw).
+    ipd_m : float
+        The IPD used, metres.
     """
 
-    name = "pair"
+    kind: Literal["chart", "population"]
+    ipd_m: float
 
-    def __init__(self, wide: LandmarkBackend, tele: LandmarkBackend) -> None:
-        self.wide = wide
-        self.tele = tele
+    @classmethod
+    def chart(cls, ipd_mm: float = 63.0) -> IpdMode:
+        """A face chart printed with ``ipd_mm`` (an adult IPD, 30–100 mm).
 
-    def detect(self, image: Any) -> FaceResult:
-        return self.wide.detect(image)
+        Raises
+        ------
+        InputError
+            An IPD outside 30–100 mm.
+        """
+        if not 30.0 < float(ipd_mm) < 100.0:
+            raise InputError(
+                f"--ipd-mm must be an adult IPD in millimetres (30–100), got {ipd_mm}"
+            )
+        return cls("chart", float(ipd_mm) / 1000.0)
 
-    def detect_many(self, images: Iterable[Any]) -> list[FaceResult]:
-        ims = list(images)
-        if len(ims) != 2:
-            return self.wide.detect_many(ims)
-        return [self.wide.detect(ims[0]), self.tele.detect(ims[1])]
+    @classmethod
+    def population(cls, prior: IpdPrior | None = None) -> IpdMode:
+        """Real faces: the mean IPD of ``prior`` (default the thesis's §3.6 sexes prior)."""
+        return cls("population", (prior or IpdPrior.population()).mean_m)
 
-    def detect_pair(
-        self, wide: Any, tele: Any, guide: TeleGuide | None = None
-    ) -> tuple[FaceResult, FaceResult]:
-        return guided_pair(self.wide, self.tele, wide, tele, guide)
+    @property
+    def source(self) -> str:
+        """The observations' ``source``: ``"face-chart"`` or ``"population"``."""
+        return "face-chart" if self.kind == "chart" else "population"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready."""
+        return {"kind": self.kind, "ipd_mm": round(1000 * self.ipd_m, 4)}
 
 
-def default_backend() -> LandmarkBackend:
-    """MediaPipe for the learning flow (measured in ``benchmarks/bench_flows.py``).
-
-    The wide is searched with two tile levels (13 detector runs instead of 42, the same faces
-    found on the bench sets) and without mirror averaging (no loss of depth accuracy on the
-    bench: the chart plane averages the faces' IPDs); the tele, guided by the wide's faces,
-    is only measured. The tele's faces are three times larger and only pair the faces and
-    start the disparity search (the eye windows refine it), so it needs no mirror averaging.
-    """
-    return PairBackend(
-        MediaPipeBackend(mirror_average=False, two_level_tiles=(0.35, 0.08)),
-        MediaPipeBackend(min_tile_px=1000, mirror_average=False),
-    )
+def store_context(config: FlowConfig, rig: Rig) -> StoreContext:
+    """The fix-store context of learning or applying on ``rig`` under ``config``."""
+    return StoreContext.build(rig, config.mode, config.context_dict())
 
 
 @dataclass(frozen=True)
@@ -146,12 +129,17 @@ class LearningResult:
     captures: tuple[CaptureLearning, ...]
     n_observations: int
     seconds: float
+    ipd: IpdMode = field(default_factory=IpdMode.chart)
+    context_id: int | None = None
+    set_fingerprint: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
         return {
             "n_captures": len(self.captures), "n_learned": sum(c.ok for c in self.captures),
             "n_observations": self.n_observations, "seconds": round(self.seconds, 3),
+            "ipd": self.ipd.to_dict(), "context_id": self.context_id,
+            "set_fingerprint": self.set_fingerprint,
             "skipped": [{"capture_id": c.capture_id, "gate": c.gate, "reason": c.reason}
                         for c in self.captures if not c.ok],
         }  # fmt: skip
@@ -186,7 +174,7 @@ def learn_face_capture(
     backend: LandmarkBackend,
     *,
     focus: FocusCorrection | None = None,
-    ipd_m: float = 0.063,
+    ipd: IpdMode | None = None,
     reference: Rectification | None = None,
 ) -> CaptureLearning:
     """The learning blocks of one face capture (module docstring)."""
@@ -206,7 +194,17 @@ def learn_face_capture(
     rect = ref if rig is calibration.rig else reference_rectification(rig, config.mode)
     path_w, path_t = cs.image_paths(entry.id)
     imgs = (read_gray(path_w), read_gray(path_t))  # decoded once for both blocks
-    res = learn_capture(cs, entry.id, rect, ipd_m=ipd_m, backend=backend, images=imgs)
+    mode = ipd or IpdMode.chart()
+    res = learn_capture(
+        cs,
+        entry.id,
+        rect,
+        ipd_m=mode.ipd_m,
+        source=mode.source,
+        depth_mode="chart" if mode.kind == "chart" else "face",
+        backend=backend,
+        images=imgs,
+    )
     stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s}
     obs = res.observations
     if not obs:
@@ -217,9 +215,8 @@ def learn_face_capture(
         wt = None
         why = "the faces are not inside the tele's view"
         if box is not None:
-            m = measure_roi(
-                rig, imgs[0], imgs[1], box, replace(config.roi, expand=1.0, coarse_expand=1.0), rect
-            )
+            roi_cfg = replace(config.roi, expand=1.0, coarse_expand=1.0)
+            m = measure_roi(rig, imgs[0], imgs[1], box, roi_cfg, rect, mode=config.mode)
             wt = m.wt
             why = m.reason or (wt.reason if wt is not None else "")
         stages["wt_scale"] = None if wt is None else wt.to_dict()
@@ -268,25 +265,51 @@ def run(
     store: FixStore | None,
     *,
     backend: LandmarkBackend | None = None,
-    ipd_mm: float = 63.0,
+    ipd: IpdMode | None = None,
+    new_context: bool = False,
     progress: Progress | None = None,
 ) -> LearningResult:
     """Learn every face capture of ``cs`` (module docstring); observations go into ``store``
     (one transaction per capture) when one is given.
 
+    Parameters
+    ----------
+    config : FlowConfig
+    cs : CaptureSet
+    calibration : Calibration
+        The calibration learned on (its rig is part of the store context).
+    store : FixStore or None
+        None: the observations are only returned.
+    backend : LandmarkBackend, optional
+        Default :func:`default_backend`.
+    ipd : IpdMode, optional
+        Default a face chart of 63 mm.
+    new_context : bool
+        Start a new context in ``store`` when it holds observations learned under another
+        calibration or configuration (else that is refused).
+    progress : callable, optional
+        ``progress(done, total, capture_id)`` after each face capture.
+
     Raises
     ------
     InputError
-        No face captures, or an IPD outside 30–100 mm.
+        No face captures.
+    ContextError
+        ``store`` was learned under another context and ``new_context`` is False; raised
+        before anything is learned or written.
     """
     t0 = time.perf_counter()
-    if not 30.0 < float(ipd_mm) < 100.0:
-        raise InputError(f"IPD must be an adult IPD in millimetres (30–100), got {ipd_mm}")
+    mode = ipd or IpdMode.chart()
     faces = [c for c in cs.captures() if c.kind == "face"]
     if not faces:
         raise InputError(
             f"capture set {cs.root} has no captures of kind 'face'; learning needs face captures"
         )
+    context_id, fingerprint = None, ""
+    if store is not None:
+        ctx = store_context(config, calibration.rig)
+        context_id = store.context_for_learning(ctx, new=new_context)
+        fingerprint = capture_set_fingerprint(cs)
     det = backend if backend is not None else default_backend()
     corr = stack_corrections(config, cs, faces, calibration)
     ref = reference_rectification(calibration.rig, config.mode)
@@ -299,26 +322,35 @@ def run(
             calibration,
             det,
             focus=corr.get(entry.id),
-            ipd_m=ipd_mm / 1000,
+            ipd=mode,
             reference=ref,
         )
         out.append(r)
         if r.ok and store is not None:
-            n_obs += store.add_capture(entry.id, list(r.observations))
+            n_obs += store.add_capture(
+                entry.id,
+                list(r.observations),
+                context_id=context_id,
+                set_fingerprint=fingerprint,
+                set_folder=str(cs.root.resolve()),
+            )
         elif r.ok:
             n_obs += len(r.observations)
         if progress is not None:
             progress(k + 1, len(faces), entry.id)
-    return LearningResult(tuple(out), n_obs, time.perf_counter() - t0)
+    seconds = time.perf_counter() - t0
+    return LearningResult(tuple(out), n_obs, seconds, mode, context_id, fingerprint)
 
 
 __all__ = [
     "CachedBackend",
     "CaptureLearning",
+    "IpdMode",
     "LearningResult",
     "PairBackend",
     "default_backend",
     "learn_face_capture",
     "run",
     "stack_corrections",
+    "store_context",
 ]

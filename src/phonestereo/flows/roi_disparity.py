@@ -40,10 +40,12 @@ def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
 class RoiConfig:
     """Parameters of the ROI measurement.
 
+    The rectification mode and whether the W-T scale is applied are not fields here: they are
+    the flow's switches (:attr:`FlowConfig.canonical`, :attr:`FlowConfig.wt_scale`), passed
+    to :func:`measure_roi` explicitly, so one configuration cannot say two things.
+
     Attributes
     ----------
-    mode : str
-        Rectification mode (canonical, §3.3; the others for ablation).
     expand : float
         ROI expansion factor per side (Fig. 4-2), ≥ 1.
     z_min_m : float
@@ -63,12 +65,9 @@ class RoiConfig:
         The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
         away, a separate local maximum) above ``max_ambiguity`` × the first makes the
         measurement fail as ambiguous.
-    wt_scale : bool
-        Fit and apply the W-T scale in the ROI (§3.5.1).
     match : MatchConfig
     """
 
-    mode: str = "canonical"
     expand: float = 1.6
     z_min_m: float = 0.4
     majority_bin_px: float = 0.5
@@ -83,7 +82,6 @@ class RoiConfig:
     coarse_expand: float = 3.0
     max_ambiguity: float = 0.97
     fine_range_px: int = 3
-    wt_scale: bool = True
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast
     # chart), so only the contrast-relative residual test is kept; σ_d still includes misfit.
@@ -287,6 +285,9 @@ def measure_roi(
     roi: tuple[int, int, int, int],
     config: RoiConfig | None = None,
     reference: Rectification | None = None,
+    *,
+    mode: str | None = None,
+    wt_scale: bool = True,
 ) -> RoiMeasurement:
     """Disparity of the surface in a raw-wide ROI (Fig. 4-2's measuring blocks).
 
@@ -300,7 +301,12 @@ def measure_roi(
         Raw wide pixels.
     config : RoiConfig
     reference : Rectification, optional
-        The reference frame (default :func:`reference_rectification` of ``rig``).
+        The reference frame (default :func:`reference_rectification` of ``rig`` in ``mode``).
+    mode : str, optional
+        Rectification mode (canonical, §3.3; the others for ablation). Default: the
+        reference's mode, else ``"canonical"``.
+    wt_scale : bool
+        Fit and apply the W-T scale in the ROI (§3.5.1).
 
     Returns
     -------
@@ -311,7 +317,10 @@ def measure_roi(
     cfg = config or RoiConfig()
     if cfg.expand < 1.0:
         raise InputError(f"ROI expansion must be >= 1, got {cfg.expand}")
-    ref = reference or reference_rectification(rig, cfg.mode)
+    mode = mode or (reference.mode if reference is not None else "canonical")
+    if reference is not None and reference.mode != mode:
+        raise InputError(f"measure_roi: mode {mode!r} but the reference is {reference.mode!r}")
+    ref = reference or reference_rectification(rig, mode)
     w_img, h_img = rig.wide.size
     x, y, w, h = (int(v) for v in roi)
     if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > w_img or y + h > h_img:
@@ -322,7 +331,7 @@ def measure_roi(
     big = _expanded(roi, cfg.expand, rig.wide.size)
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
     opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
-    win = Rectification.from_rig(rig, cfg.mode, opts)
+    win = Rectification.from_rig(rig, mode, opts)
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
@@ -402,7 +411,7 @@ def measure_roi(
     xy = res.xy[idx] + shift
     d, e, sd = res.d[idx], res.e[idx], res.sigma_d[idx]
     wt = None
-    if cfg.wt_scale:
+    if wt_scale:
         c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
         fit = fit_wt_scale(xy, xy - np.column_stack([d, e]), c_tele, sigma_px=res.sigma_e[idx])
         wt = fit

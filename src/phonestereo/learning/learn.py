@@ -4,36 +4,32 @@ Per face capture (Fig. 4-3, 4-4): landmarks in the wide and the tele → IPD dep
 disparity (:func:`~phonestereo.learning.landmark_disparity.landmark_disparity`) → one
 :class:`~phonestereo.learning.observation.Observation` per measured face (sensor position = the
 face's rectified wide pupil midpoint, measured and expected disparity, depth, orientation
-bucket, focus group, time, temperature) → one :meth:`FixStore.add_capture` per capture.
-Captures without usable faces are skipped with the reason (and not written to the store).
+bucket, focus group, time, temperature).
 
-Not (yet) in this flow: the heating gate, the focus calibration of refocus stacks and the W-T
-scale (§3.5); observations are learned on the calibration as given.
+This module is the per-capture landmark block only. The learning of a capture set — gates,
+focus calibration, W-T scale, the store and its context — is
+:func:`phonestereo.flows.learning.run`, the one path every command takes (an earlier
+``learn_capture_set`` here had none of those: it corrected focus breathing twice and learned
+cold captures).
 """
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.fixes.orientation import orientation_bucket
 from phonestereo.io import (
-    Calibration,
     CaptureEntry,
     CaptureSet,
-    load_calibration,
-    load_capture_set,
     read_gray,
 )
-from phonestereo.learning.ipd import IPD_M, IpdPrior
+from phonestereo.learning.ipd import IPD_M
 from phonestereo.learning.landmark_disparity import (
     DepthMode,
     LandmarkDisparityResult,
@@ -41,7 +37,6 @@ from phonestereo.learning.landmark_disparity import (
 )
 from phonestereo.learning.observation import Observation
 from phonestereo.learning.pair_guide import WideToTeleGuide
-from phonestereo.learning.store import FixStore
 from phonestereo.rectification import Rectification
 
 #: Progress callback: ``progress(done, total, capture_id)``.
@@ -175,111 +170,3 @@ def learn_capture(
         )
     reason = "" if obs else (res.reason or "no face measured")
     return LearnResult(entry.id, tuple(obs), res, reason, timing)
-
-
-@dataclass(frozen=True)
-class LearnSummary:
-    """The learning of a capture set: per-capture results and what went into the store."""
-
-    store_path: Path
-    results: tuple[LearnResult, ...]
-    skipped: tuple[tuple[str, str], ...]
-    n_observations: int
-    elapsed_s: float
-
-    @property
-    def seconds_per_capture(self) -> float:
-        """Mean wall time per face capture processed, seconds."""
-        n = len(self.results)
-        return float(np.mean([r.timing_s.get("total", np.nan) for r in self.results])) if n else 0.0
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly summary."""
-        return {
-            "store": str(self.store_path),
-            "n_captures": len(self.results),
-            "n_learned": sum(r.ok for r in self.results),
-            "n_observations": self.n_observations,
-            "skipped": [{"capture_id": c, "reason": r} for c, r in self.skipped],
-            "elapsed_s": round(self.elapsed_s, 3),
-            "seconds_per_capture": round(self.seconds_per_capture, 4),
-            "captures": [r.to_dict() for r in self.results],
-        }
-
-
-def learn_capture_set(
-    folder: str | os.PathLike[str] | CaptureSet,
-    calibration: str | os.PathLike[str] | Calibration,
-    store: str | os.PathLike[str] | FixStore,
-    *,
-    ipd_mm: float = 63.0,
-    population: IpdPrior | bool | None = None,
-    backend: LandmarkBackend | None = None,
-    progress: Progress | None = None,
-) -> LearnSummary:
-    """Learn every face capture of a capture set into a fix store.
-
-    Parameters
-    ----------
-    folder : path or CaptureSet
-        The capture set.
-    calibration : path or Calibration
-        The calibration to learn on (e.g. the capture set's factory ``calibration.json``).
-    store : path or FixStore
-        The fix store (created when absent); each capture is one transaction.
-    ipd_mm : float
-        The face chart's printed IPD, millimetres (face-chart mode: all faces on one plane).
-    population : IpdPrior or bool, optional
-        Real faces of unknown IPD: their depths use the prior's mean IPD (``True``: the
-        thesis's §3.6 sexes prior) and each head's own yaw; overrides ``ipd_mm``.
-    backend : LandmarkBackend, optional
-        Default: one :class:`MediaPipeBackend`.
-    progress : callable, optional
-        ``progress(done, total, capture_id)`` after each face capture.
-
-    Returns
-    -------
-    LearnSummary
-
-    Raises
-    ------
-    InputError
-        Unreadable capture set or calibration, a non-positive IPD, no face captures.
-    """
-    t0 = time.perf_counter()
-    cs = folder if isinstance(folder, CaptureSet) else load_capture_set(folder)
-    cal = calibration if isinstance(calibration, Calibration) else load_calibration(calibration)
-    mode: DepthMode
-    if population is True:
-        population = IpdPrior.population()
-    if isinstance(population, IpdPrior):
-        ipd_m, source, mode = population.mean_m, "population", "face"
-    else:
-        if not 30.0 < float(ipd_mm) < 100.0:
-            raise InputError(f"--ipd-mm must be an adult IPD in millimetres (30–100), got {ipd_mm}")
-        ipd_m, source, mode = float(ipd_mm) / 1000.0, "face-chart", "chart"
-    faces = [c for c in cs.captures() if c.kind == "face"]
-    if not faces:
-        raise InputError(
-            f"capture set {cs.root} has no captures of kind 'face'; learning needs face captures"
-        )
-    rect = Rectification.from_rig(cal.rig, "canonical")
-    det = backend if backend is not None else MediaPipeBackend()
-    fs = store if isinstance(store, FixStore) else FixStore(store)
-    results, skipped, n_obs = [], [], 0
-    try:
-        for k, entry in enumerate(faces):
-            res = learn_capture(
-                cs, entry.id, rect, ipd_m=ipd_m, source=source, depth_mode=mode, backend=det
-            )
-            results.append(res)
-            if res.ok:
-                n_obs += fs.add_capture(entry.id, list(res.observations))
-            else:
-                skipped.append((entry.id, res.reason))
-            if progress is not None:
-                progress(k + 1, len(faces), entry.id)
-    finally:
-        if not isinstance(store, FixStore):
-            fs.close()
-    return LearnSummary(fs.path, tuple(results), tuple(skipped), n_obs, time.perf_counter() - t0)

@@ -1,12 +1,15 @@
 """The fix store: learned observations in one SQLite file (docs/fix-store.md, thesis §3.6).
 
 Durable and shared: WAL journal with ``synchronous=FULL``, one ``BEGIN IMMEDIATE``
-transaction per learned capture (so a writer killed mid-capture leaves every earlier capture
-and no part of the one it was writing), retries with backoff while another process holds the
-write lock, a ``schema_version`` table with a list of migrations (the file is backed up as
-``<name>.v<N>.bak`` before an old one is migrated). A damaged file or one that is not a fix
-store raises :class:`~phonestereo.errors.StoreError` naming the file and what to do — it is
-never recreated — and so does a path that cannot be written.
+transaction per learned capture, keyed by (context, capture-set fingerprint, capture id)
+(:mod:`~phonestereo.learning.store_contexts`: what the observations were learned under;
+:func:`~phonestereo.io.fingerprint.capture_set_fingerprint`: which bytes), so a writer
+killed mid-capture leaves every earlier capture and no part of the one it was writing;
+retries with backoff while another process holds the write lock; a ``schema_version``
+table with a list of migrations (the file is backed up as ``<name>.v<N>.bak`` before an old
+one is migrated). A damaged file or one that is not a fix store raises
+:class:`~phonestereo.errors.StoreError` naming the file and what to do — it is never
+recreated or written to — and so does a path that cannot be written.
 
 Examples
 --------
@@ -18,17 +21,17 @@ Examples
 ...     store.add_capture("f01", [ob])
 ...     store.stats().n_observations, store.schema_version
 1
-(1, 2)
+(1, 3)
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sqlite3
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -40,47 +43,36 @@ from phonestereo.learning.observation import (
     TEXT_FIELDS,
     Observation,
     _rows_to_array,
-    write_observations,
+)
+from phonestereo.learning.provenance import StoreContext
+from phonestereo.learning.store_contexts import (
+    ContextChoice,
+    ContextInfo,
+    context_for_applying,
+    context_for_learning,
+    insert_context,
+    list_contexts,
 )
 from phonestereo.learning.store_schema import (
     SCHEMA_VERSION,
+    UNRECORDED,
     backup_file,
-    corrupt_error,
+    filesystem_read_only,
     migrate,
     open_connection,
     read_schema_version,
     retry_busy,
     store_error,
 )
+from phonestereo.learning.store_stats import StoreStats, export_store, store_stats
 
 T = TypeVar("T")
 
 _COLS = ", ".join(FIELDS)
-_INSERT = f"INSERT INTO observations ({_COLS}) VALUES ({', '.join('?' * len(FIELDS))})"
-
-
-@dataclass(frozen=True)
-class StoreStats:
-    """What a fix store holds (``phonestereo store stats``).
-
-    ``by_orientation`` maps each bucket to its count and the mean and standard deviation of
-    its corrections (px); ``ranges`` maps a column to its [min, max] (None when empty/unknown).
-    """
-
-    path: str
-    schema_version: int
-    journal_mode: str
-    size_bytes: int
-    n_captures: int
-    n_observations: int
-    by_orientation: dict[str, dict[str, float]]
-    by_focus_group: dict[str, int]
-    by_source: dict[str, int]
-    ranges: dict[str, list[float] | None]
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict."""
-        return asdict(self)
+_INSERT = (
+    f"INSERT INTO observations (context_id, set_fingerprint, {_COLS}) "
+    f"VALUES (?, ?, {', '.join('?' * len(FIELDS))})"
+)
 
 
 class FixStore:
@@ -116,27 +108,14 @@ class FixStore:
         self.readonly = bool(readonly)
         self.timeout_s = float(timeout_s)
         self.backup_path: Path | None = None
-        self._conn = open_connection(self.path, self.readonly, self.timeout_s)
+        self._conn = open_connection(self.path, self.readonly, self.timeout_s, verify)
         try:
-            if verify:
-                self._verify()
             self._upgrade()
         except BaseException:
             self._conn.close()
             raise
 
     # --- opening --------------------------------------------------------------------------
-    def _verify(self) -> None:
-        try:
-            rows = [r[0] for r in self._conn.execute("PRAGMA integrity_check(20)")]
-        except sqlite3.DatabaseError as exc:
-            raise self._error(exc, "check") from exc
-        if rows != ["ok"]:
-            lines = [ln.strip() for r in rows for ln in str(r).splitlines() if ln[:3] != "***"]
-            more = f" (+{len(lines) - 3} more)" if len(lines) > 3 else ""
-            detail = "; ".join(lines[:3]) + more
-            raise corrupt_error(self.path, f"PRAGMA integrity_check reports {detail}")
-
     def _upgrade(self) -> None:
         try:
             v = read_schema_version(self._conn, self.path)
@@ -152,9 +131,11 @@ class FixStore:
         if self.readonly:
             if v == 0:
                 raise StoreError(f"'{self.path}' is an empty file, not yet a fix store")
+            ro_fs = filesystem_read_only(self.path.parent)
+            where = "copy it to a writable folder and " if ro_fs else ""
             raise StoreError(
-                f"the fix store '{self.path}' has the old schema version {v}; open it writable "
-                f"once to migrate it to version {SCHEMA_VERSION} (a backup is kept)"
+                f"the fix store '{self.path}' has the old schema version {v}; {where}open it "
+                f"writable once to migrate it to version {SCHEMA_VERSION} (a backup is kept)"
             )
         if v >= 1:  # keep the old file as it was
             self.backup_path = backup_file(self._conn, self.path, v)
@@ -191,11 +172,59 @@ class FixStore:
             raise self._error(exc, action) from exc
 
     # --- writing --------------------------------------------------------------------------
-    def add_capture(self, capture_id: str, observations: Sequence[Observation]) -> int:
+    def context_for_learning(self, context: StoreContext, *, new: bool = False) -> int:
+        """The id of the context to learn ``context``'s observations into (created when the
+        store has none that holds observations, or when ``new``).
+
+        Raises
+        ------
+        ContextError
+            The store was learned under another context (the message names what differs).
+        """
+        return self._transaction(
+            lambda conn: context_for_learning(conn, self.path, context, new), "write to"
+        )
+
+    def context_for_applying(self, context: StoreContext) -> ContextChoice:
+        """The context whose observations apply under ``context`` (read only).
+
+        Raises
+        ------
+        ContextError
+            No context of the store equals ``context``; the message names the field.
+        """
+        try:
+            return self._retry(lambda: context_for_applying(self._conn, self.path, context))
+        except sqlite3.Error as exc:
+            raise self._error(exc, "read") from exc
+
+    def contexts(self) -> list[ContextInfo]:
+        """Every context of the store with its counts."""
+        try:
+            return self._retry(lambda: list_contexts(self._conn))
+        except sqlite3.Error as exc:
+            raise self._error(exc, "read") from exc
+
+    def add_capture(
+        self,
+        capture_id: str,
+        observations: Sequence[Observation],
+        *,
+        context_id: int | None = None,
+        set_fingerprint: str = UNRECORDED,
+        set_folder: str = "",
+    ) -> int:
         """Store the observations learned from one capture, in one transaction.
 
-        Re-learning a capture replaces its earlier observations (idempotent per capture id).
-        An empty list records the capture as learned with no observations.
+        Re-learning a capture (same context, set fingerprint and id) replaces its earlier
+        observations; the same id in another set is another capture. An empty list records
+        the capture as learned with no observations. Only
+        :func:`phonestereo.flows.learning.run` calls this in the product.
+
+        ``context_id`` comes from :meth:`context_for_learning` (None: an unrecorded context,
+        for tests and imports), ``set_fingerprint`` from
+        :func:`~phonestereo.io.fingerprint.capture_set_fingerprint`; ``set_folder`` is shown
+        by ``store stats``.
 
         Returns
         -------
@@ -205,6 +234,8 @@ class FixStore:
         cid = str(capture_id)
         if not cid.strip():
             raise InputError("capture_id must be a non-empty string")
+        if not str(set_fingerprint).strip():
+            raise InputError("set_fingerprint must be a non-empty string")
         rows = []
         for ob in observations:
             if not isinstance(ob, Observation):
@@ -219,19 +250,32 @@ class FixStore:
             )
 
         def write(conn: sqlite3.Connection) -> int:
-            conn.execute("DELETE FROM observations WHERE capture_id = ?", (cid,))
+            ctx = context_id
+            if ctx is None:
+                found = conn.execute(
+                    "SELECT MIN(id) FROM contexts WHERE calibration IS NULL"
+                ).fetchone()[0]
+                ctx = found if found is not None else insert_context(conn, None)
+            key = (ctx, set_fingerprint, cid)
             conn.execute(
-                "INSERT INTO captures VALUES (?, ?, ?) ON CONFLICT(capture_id) DO UPDATE SET "
-                "learned_unix = excluded.learned_unix, n_observations = excluded.n_observations",
-                (cid, time.time(), len(rows)),
+                "DELETE FROM observations WHERE context_id = ? AND set_fingerprint = ? AND "
+                "capture_id = ?",
+                key,
             )
-            conn.executemany(_INSERT, rows)
+            conn.execute(
+                "INSERT INTO captures VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT DO UPDATE SET "
+                "set_folder = excluded.set_folder, learned_unix = excluded.learned_unix, "
+                "n_observations = excluded.n_observations",
+                (*key, str(set_folder), time.time(), len(rows)),
+            )
+            conn.executemany(_INSERT, [(ctx, set_fingerprint, *r) for r in rows])
             return len(rows)
 
         return self._transaction(write, "write to")
 
     def remove_capture(self, capture_id: str) -> bool:
-        """Forget one capture and its observations; True if it was there."""
+        """Forget every capture of this id (in every set and context) and its observations;
+        True if there was one."""
 
         def delete(conn: sqlite3.Connection) -> bool:
             conn.execute("DELETE FROM observations WHERE capture_id = ?", (capture_id,))
@@ -241,7 +285,17 @@ class FixStore:
         return self._transaction(delete, "write to")
 
     # --- reading --------------------------------------------------------------------------
-    def _read(self, sql: str, args: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
+    @contextlib.contextmanager
+    def snapshot(self) -> Iterator[None]:
+        """Reads inside see one consistent snapshot (WAL readers never wait for writers)."""
+        self._conn.execute("BEGIN")
+        try:
+            yield
+        finally:
+            self._conn.execute("COMMIT")
+
+    def query(self, sql: str, args: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
+        """Rows of one read-only SQL query (retried while busy; errors as StoreError)."""
         try:
             return self._retry(lambda: self._conn.execute(sql, tuple(args)).fetchall())
         except sqlite3.Error as exc:
@@ -253,8 +307,10 @@ class FixStore:
         return read_schema_version(self._conn, self.path)
 
     def capture_ids(self) -> list[str]:
-        """Ids of the learned captures, sorted."""
-        return [r[0] for r in self._read("SELECT capture_id FROM captures ORDER BY capture_id")]
+        """Ids of the learned captures (each once, whatever its set), sorted."""
+        return [
+            r[0] for r in self.query("SELECT DISTINCT capture_id FROM captures ORDER BY 1")
+        ]
 
     def observations(
         self,
@@ -262,13 +318,15 @@ class FixStore:
         focus_group: str | None = None,
         source: str | None = None,
         capture_id: str | None = None,
+        context_id: int | None = None,
     ) -> np.ndarray:
         """Learned observations matching every given filter, in insertion order.
 
         Returns
         -------
         ndarray, shape (N,), structured
-            Fields :data:`~phonestereo.learning.observation.FIELDS`; unknown temperature and
+            Fields :data:`~phonestereo.learning.observation.FIELDS` (``context_id``: only
+            that context's, see :meth:`context_for_applying`); unknown temperature and
             sigma are NaN (see :func:`~phonestereo.learning.observation.observations_to_array`).
         """
         filt = {
@@ -276,12 +334,13 @@ class FixStore:
             "focus_group": focus_group,
             "source": source,
             "capture_id": capture_id,
+            "context_id": context_id,
         }
         where = [f"{k} = ?" for k, v in filt.items() if v is not None]
         sql = f"SELECT {_COLS} FROM observations"
         if where:
             sql += " WHERE " + " AND ".join(where)
-        rows = self._read(sql + " ORDER BY id", [v for v in filt.values() if v is not None])
+        rows = self.query(sql + " ORDER BY id", [v for v in filt.values() if v is not None])
         text = {FIELDS.index(n) for n in TEXT_FIELDS}
         clean = [
             tuple(v if i in text else (math.nan if v is None else v) for i, v in enumerate(r))
@@ -291,7 +350,7 @@ class FixStore:
 
     def integrity(self) -> str:
         """``"ok"`` or the problems ``PRAGMA integrity_check`` reports."""
-        return "; ".join(r[0] for r in self._read("PRAGMA integrity_check(20)"))
+        return "; ".join(r[0] for r in self.query("PRAGMA integrity_check(20)"))
 
     def size_bytes(self) -> int:
         """Bytes on disk: the file plus its WAL."""
@@ -299,63 +358,15 @@ class FixStore:
         return self.path.stat().st_size + (wal.stat().st_size if wal.exists() else 0)
 
     def stats(self) -> StoreStats:
-        """Counts per orientation bucket, focus group and source, and value ranges."""
-        by_o = {
-            o: {"n": n, "correction_mean_px": m, "correction_std_px": math.sqrt(max(v - m * m, 0))}
-            for o, n, m, v in self._read(
-                "SELECT orientation, COUNT(*), AVG(d_expected_px - d_measured_px), "
-                "AVG((d_expected_px - d_measured_px) * (d_expected_px - d_measured_px)) "
-                "FROM observations GROUP BY orientation ORDER BY orientation"
-            )
-        }
-        counts = {
-            col: dict(self._read(f"SELECT {col}, COUNT(*) FROM observations GROUP BY {col}"))
-            for col in ("focus_group", "source")
-        }
-        ranges: dict[str, list[float] | None] = {}
-        for col in ("x_px", "y_px", "d_measured_px", "depth_m", "time_s", "temperature_c"):
-            lo, hi = self._read(f"SELECT MIN({col}), MAX({col}) FROM observations")[0]
-            ranges[col] = None if lo is None else [float(lo), float(hi)]
-        return StoreStats(
-            path=str(self.path),
-            schema_version=self.schema_version,
-            journal_mode=str(self._read("PRAGMA journal_mode")[0][0]),
-            size_bytes=self.size_bytes(),
-            n_captures=int(self._read("SELECT COUNT(*) FROM captures")[0][0]),
-            n_observations=int(self._read("SELECT COUNT(*) FROM observations")[0][0]),
-            by_orientation=by_o,
-            by_focus_group=counts["focus_group"],
-            by_source=counts["source"],
-            ranges=ranges,
-        )
+        """Counts per orientation bucket, focus group and source, value ranges, the contexts
+        and the capture sets learned (:func:`~phonestereo.learning.store_stats.store_stats`)."""
+        return store_stats(self)
 
     # --- maintenance ----------------------------------------------------------------------
     def export(self, out: str | os.PathLike[str]) -> int:
-        """Write every observation to ``out`` (``.csv`` or ``.json``); returns the row count.
-
-        The file is written beside its destination and renamed into place, so a failed export
-        never leaves half a file. JSON holds ``schema_version``, ``captures`` and
-        ``observations`` (unknown values as null); CSV one observation per row, unknown empty.
-        """
-        dest = Path(out)
-        if dest.suffix.lower() not in (".csv", ".json"):
-            raise InputError(f"export file must end in .csv or .json, got '{dest}'")
-        self._conn.execute("BEGIN")  # one read snapshot for both queries (WAL readers never wait)
-        try:
-            obs = self.observations()
-            caps = self._read("SELECT capture_id, learned_unix, n_observations FROM captures")
-        finally:
-            self._conn.execute("COMMIT")
-        meta = {
-            "format": "phonestereo-fix-store",
-            "schema_version": self.schema_version,
-            "store": str(self.path),
-            "captures": [
-                {"capture_id": c, "learned_unix": t, "n_observations": n} for c, t, n in caps
-            ],
-        }
-        write_observations(dest, obs, meta)
-        return int(obs.shape[0])
+        """Write every observation to ``out`` (``.csv`` or ``.json``); returns the row count
+        (:func:`~phonestereo.learning.store_stats.export_store`)."""
+        return export_store(self, out)
 
     def vacuum(self) -> tuple[int, int]:
         """Checkpoint the WAL and rebuild the file compactly; returns (bytes before, after)."""
@@ -381,3 +392,4 @@ class FixStore:
 
     def __repr__(self) -> str:
         return f"FixStore('{self.path}', readonly={self.readonly})"
+

@@ -21,9 +21,16 @@ from phonestereo.errors import StoreError
 T = TypeVar("T")
 
 #: The schema this code writes; older files are migrated on open.
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: The first 16 bytes of every SQLite database file.
 SQLITE_MAGIC = b"SQLite format 3\x00"
+
+#: The set fingerprint and context note of captures learned before schema v3.
+UNRECORDED = "unrecorded"
+LEGACY_NOTE = (
+    "learned before schema v3: the calibration, lens model, rectification mode and flow "
+    "configuration were not recorded"
+)
 
 MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 0 → 1: the thesis's observation (sensor position, disparities, depth, conditions)
@@ -42,6 +49,51 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "ALTER TABLE observations ADD COLUMN sigma_px REAL",
         "ALTER TABLE observations ADD COLUMN source TEXT NOT NULL DEFAULT 'unknown'",
     ),
+    (  # 2 → 3: provenance. Contexts (calibration, lens model, rectification mode, flow
+        # config) and captures keyed by (context, capture-set fingerprint, capture id). What
+        # older versions learned goes into context 1 with every field unrecorded (NULL) and
+        # the set fingerprint 'unrecorded'; nothing is dropped.
+        "CREATE TABLE contexts (id INTEGER PRIMARY KEY, created_unix REAL NOT NULL, "
+        "calibration_sha256 TEXT, calibration TEXT, lens_model TEXT, rectification_mode TEXT, "
+        "flow_config_sha256 TEXT, flow_config TEXT, note TEXT NOT NULL DEFAULT '')",
+        "INSERT INTO contexts (id, created_unix, note) SELECT 1, MIN(learned_unix), "
+        f"'{LEGACY_NOTE}' FROM captures HAVING COUNT(*) > 0",
+        "CREATE TABLE captures_v3 (context_id INTEGER NOT NULL REFERENCES contexts(id), "
+        "set_fingerprint TEXT NOT NULL, capture_id TEXT NOT NULL, "
+        "set_folder TEXT NOT NULL DEFAULT '', learned_unix REAL NOT NULL, "
+        "n_observations INTEGER NOT NULL, PRIMARY KEY (context_id, set_fingerprint, capture_id))",
+        f"INSERT INTO captures_v3 SELECT 1, '{UNRECORDED}', capture_id, '', learned_unix, "
+        "n_observations FROM captures",
+        "CREATE TABLE observations_v3 (id INTEGER PRIMARY KEY, context_id INTEGER NOT NULL, "
+        "set_fingerprint TEXT NOT NULL, capture_id TEXT NOT NULL, x_px REAL NOT NULL, "
+        "y_px REAL NOT NULL, d_measured_px REAL NOT NULL, d_expected_px REAL NOT NULL, "
+        "depth_m REAL NOT NULL, orientation TEXT NOT NULL, focus_group TEXT NOT NULL, "
+        "time_s REAL NOT NULL, temperature_c REAL, sigma_px REAL, "
+        "source TEXT NOT NULL DEFAULT 'unknown', "
+        "FOREIGN KEY (context_id, set_fingerprint, capture_id) REFERENCES "
+        "captures_v3 (context_id, set_fingerprint, capture_id) ON DELETE CASCADE)",
+        f"INSERT INTO observations_v3 SELECT id, 1, '{UNRECORDED}', capture_id, x_px, y_px, "
+        "d_measured_px, d_expected_px, depth_m, orientation, focus_group, time_s, "
+        "temperature_c, sigma_px, source FROM observations",
+        "DROP TABLE observations",
+        "DROP TABLE captures",
+        "ALTER TABLE captures_v3 RENAME TO captures",  # also renames the foreign key's target
+        "ALTER TABLE observations_v3 RENAME TO observations",
+        "CREATE INDEX observations_key ON observations(context_id, set_fingerprint, capture_id)",
+        "CREATE INDEX observations_bucket ON observations(context_id, orientation, focus_group)",
+    ),
+)
+#: The current schema from nothing (a new file gets it directly, not through every migration:
+#: no dropped tables, compact pages). tests/learning/test_store_migration.py checks that it
+#: equals what the migrations build.
+CURRENT_SCHEMA: tuple[str, ...] = (
+    "CREATE TABLE schema_version (version INTEGER NOT NULL, applied_unix REAL NOT NULL)",
+    MIGRATIONS[2][0],  # contexts
+    *(
+        sql.replace("captures_v3", "captures").replace("observations_v3", "observations")
+        for sql in (MIGRATIONS[2][2], MIGRATIONS[2][4])
+    ),
+    *MIGRATIONS[2][-2:],
 )
 if len(MIGRATIONS) != SCHEMA_VERSION:  # pragma: no cover - a developer error
     raise RuntimeError("store_schema: one migration per schema version is required")
@@ -73,6 +125,11 @@ def migrate(conn: sqlite3.Connection, path: Path, target: int = SCHEMA_VERSION) 
     Returns the version the file had.
     """
     v = read_schema_version(conn, path)
+    if v == 0 and target == SCHEMA_VERSION:
+        for sql in CURRENT_SCHEMA:
+            conn.execute(sql)
+        conn.execute("INSERT INTO schema_version VALUES (?, ?)", (target, time.time()))
+        return v
     for i in range(v, target):
         for sql in MIGRATIONS[i]:
             conn.execute(sql)
@@ -134,12 +191,30 @@ def corrupt_error(path: Path, detail: str) -> StoreError:
     )
 
 
+def filesystem_read_only(path: Path) -> bool:
+    """True when ``path`` lies on a file system mounted read-only (chmod cannot help there)."""
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
 def store_error(path: Path, exc: BaseException, action: str, timeout_s: float) -> StoreError:
-    """Translate an SQLite error raised while doing ``action`` into a StoreError with the fix."""
+    """Translate an SQLite error raised while doing ``action`` into a StoreError with the fix.
+
+    Only a write (``action`` starting with "write", "migrate" or "vacuum") can have rolled
+    something back; a read says that nothing was changed.
+    """
     msg = str(exc)
     code = getattr(exc, "sqlite_errorcode", 0) & 0xFF
     where = f"cannot {action} the fix store '{path}'"
+    writing = action.split()[0] in ("write", "migrate", "vacuum")
     if code == sqlite3.SQLITE_READONLY or "readonly" in msg:
+        if filesystem_read_only(path.parent):
+            return StoreError(
+                f"{where}: it is on a read-only file system ({msg}); copy it to a writable "
+                "folder to learn into it. Nothing was changed."
+            )
         return StoreError(
             f"{where}: it is read-only ({msg}); make the file and its folder writable. "
             "Nothing was changed."
@@ -156,23 +231,83 @@ def store_error(path: Path, exc: BaseException, action: str, timeout_s: float) -
         )
     if code in (sqlite3.SQLITE_CORRUPT, sqlite3.SQLITE_NOTADB) or "malformed" in msg:
         return corrupt_error(path, msg)
+    if code == sqlite3.SQLITE_CANTOPEN and not writing:
+        return StoreError(
+            f"{where}: SQLite cannot open it for reading ({msg}); a store in WAL mode needs its "
+            "folder writable (or the file on a read-only mount) to be read. Copy it to a "
+            "writable folder. Nothing was changed."
+        )
+    if not writing:
+        return StoreError(f"{where}: {msg}. Nothing was changed.")
     return StoreError(
         f"{where}: {msg}. The transaction was rolled back; earlier captures are intact."
     )
 
 
-def open_connection(path: Path, readonly: bool, timeout_s: float) -> sqlite3.Connection:
+def _connect(p: Path, mode: str, timeout_s: float, immutable: bool = False) -> sqlite3.Connection:
+    extra = "&immutable=1" if immutable else ""
+    try:
+        return sqlite3.connect(
+            f"{p.resolve().as_uri()}?mode={mode}{extra}",
+            uri=True,
+            timeout=min(timeout_s, 5.0),  # busy handler per attempt; retry_busy bounds the total
+            isolation_level=None,
+        )
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot open the fix store '{p}': {exc}; check the path") from exc
+
+
+def _not_writable(p: Path, what: str) -> StoreError:
+    if filesystem_read_only(p if p.is_dir() else p.parent):
+        return StoreError(
+            f"the fix store '{p}' is on a read-only file system; chmod cannot help: copy it to "
+            "a writable folder to learn into it (commands that only read it, such as `depth` "
+            "and `store stats`, work where it is). Its contents are untouched."
+        )
+    if what == "file":
+        return StoreError(
+            f"the fix store '{p}' is not writable; make it writable (chmod u+w '{p}') or "
+            "open it read-only to inspect it. Its contents are untouched."
+        )
+    return StoreError(
+        f"the folder '{p.parent}' of the fix store '{p}' is not writable (SQLite keeps "
+        "its journal beside the file); make the folder writable or choose another path"
+    )
+
+
+def verify_integrity(conn: sqlite3.Connection, path: Path, timeout_s: float) -> None:
+    """``PRAGMA integrity_check``; a damaged file raises the StoreError saying what to do."""
+    try:
+        rows = [r[0] for r in conn.execute("PRAGMA integrity_check(20)")]
+    except sqlite3.DatabaseError as exc:
+        err = store_error(path, exc, "check", timeout_s)
+        if "damaged" in str(err):  # the check itself could not read the file
+            raise corrupt_error(path, f"PRAGMA integrity_check fails ({exc})") from exc
+        raise err from exc
+    if rows != ["ok"]:
+        lines = [ln.strip() for r in rows for ln in str(r).splitlines() if ln[:3] != "***"]
+        more = f" (+{len(lines) - 3} more)" if len(lines) > 3 else ""
+        raise corrupt_error(path, f"PRAGMA integrity_check reports {'; '.join(lines[:3])}{more}")
+
+
+def open_connection(
+    path: Path, readonly: bool, timeout_s: float, verify: bool = True
+) -> sqlite3.Connection:
     """Check the path, then connect in autocommit mode (transactions are explicit), with
     foreign keys on and, for writing, the WAL journal and ``synchronous=FULL``.
 
     Creates the file (and missing parent folders) only when it does not exist and
-    ``readonly`` is false; an existing file is opened with ``mode=rw`` so it is never recreated.
+    ``readonly`` is false. An existing file is first opened read-only and checked to be a
+    fix store (or an empty database): another application's SQLite file is refused before
+    anything is written to it (its journal mode is never switched to WAL); with ``verify``
+    its integrity is checked first (:func:`verify_integrity`). On a read-only
+    file system a read-only store is opened ``immutable`` (no -shm file is needed).
 
     Raises
     ------
     StoreError
-        The path is a folder, unreadable, not writable, not an SQLite file, or absent when
-        ``readonly``; the message names the path and the fix.
+        The path is a folder, unreadable, not writable, not an SQLite file or not a fix
+        store, or absent when ``readonly``; the message names the path and the fix.
     """
     p = path
     if p.is_dir():
@@ -187,12 +322,25 @@ def open_connection(path: Path, readonly: bool, timeout_s: float) -> sqlite3.Con
             ) from exc
         if head and head != SQLITE_MAGIC:
             raise corrupt_error(p, "it is not an SQLite database (wrong file header)")
-        mode = "ro" if readonly else "rw"
         if not readonly and not os.access(p, os.W_OK):
-            raise StoreError(
-                f"the fix store '{p}' is not writable; make it writable (chmod u+w '{p}') or "
-                "open it read-only to inspect it. Its contents are untouched."
-            )
+            raise _not_writable(p, "file")
+        if head:  # a database: make sure it is ours before writing anything to it
+            ro = _connect(p, "ro", timeout_s, immutable=filesystem_read_only(p.parent))
+            try:
+                if verify:
+                    verify_integrity(ro, p, timeout_s)
+                retry_busy(lambda: read_schema_version(ro, p), timeout_s)
+            except sqlite3.DatabaseError as exc:
+                ro.close()
+                raise store_error(p, exc, "open", timeout_s) from exc
+            except BaseException:
+                ro.close()
+                raise
+            if readonly:
+                ro.execute("PRAGMA foreign_keys = ON")
+                return ro
+            ro.close()
+        mode = "ro" if readonly else "rw"
     elif readonly:
         raise StoreError(f"the fix store '{p}' does not exist; learn into it to create it")
     else:
@@ -205,19 +353,8 @@ def open_connection(path: Path, readonly: bool, timeout_s: float) -> sqlite3.Con
                 f"({exc.strerror or exc}); choose a path in a writable folder"
             ) from exc
     if not readonly and not os.access(p.parent, os.W_OK | os.X_OK):
-        raise StoreError(
-            f"the folder '{p.parent}' of the fix store '{p}' is not writable (SQLite keeps "
-            "its journal beside the file); make the folder writable or choose another path"
-        )
-    try:
-        conn = sqlite3.connect(
-            f"{p.resolve().as_uri()}?mode={mode}",
-            uri=True,
-            timeout=min(timeout_s, 5.0),  # busy handler per attempt; retry_busy bounds the total
-            isolation_level=None,
-        )
-    except sqlite3.Error as exc:
-        raise StoreError(f"cannot open the fix store '{p}': {exc}; check the path") from exc
+        raise _not_writable(p, "folder")
+    conn = _connect(p, mode, timeout_s)
     try:
         conn.execute("PRAGMA foreign_keys = ON")
         if not readonly:

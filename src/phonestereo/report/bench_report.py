@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config_file import flow_config_from_dict
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 
@@ -151,7 +152,8 @@ def _ablation(bench: dict[str, Any]) -> str:
 def write_report(bench: dict[str, Any], out: str | Path, *, title: str = "phonestereo") -> Path:
     """Write the HTML report of a :func:`~phonestereo.evaluation.bench.run_bench` result."""
     root = Path(bench["capture_set"])
-    cfg = FlowConfig()
+    given = {k: v for k, v in bench.get("config", {}).items() if k != "mode"}
+    cfg = flow_config_from_dict(given, "the bench's config") if given else FlowConfig()
     cs = load_capture_set(root)
     ver = [c.id for c in cs.captures() if c.kind == "verification"]
     faces = [c.id for c in cs.captures() if c.kind == "face"]

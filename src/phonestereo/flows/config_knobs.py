@@ -1,0 +1,268 @@
+"""The documentation of every flow-configuration knob: unit, meaning, why the default.
+
+One entry per field of :class:`~phonestereo.flows.config.FlowConfig`,
+:class:`~phonestereo.flows.roi_disparity.RoiConfig` and
+:class:`~phonestereo.features.match_config.MatchConfig` (the defaults themselves live only in
+those dataclasses). :mod:`phonestereo.flows.config_file` turns these into the pydantic schema
+of ``--config FLOW.json``; docs/flow-config.md is generated from the same table, and a test
+fails when a field has no entry.
+"""
+
+from __future__ import annotations
+
+#: section → field → (unit, meaning, why the default).
+KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
+    "flow": {
+        "warmup_s": (
+            "s",
+            "Heated gate: a capture taken sooner than this after the camera "
+            "started is not learned or measured (§3.1).",
+            "Tuned to the simulator presets' heating τ = 70 s: 180 s ≈ 2.6 τ, when "
+            "92 % of the warm-up drift has happened (thesis: ~3 min). Use ≈ 2.6 × "
+            "your phone's τ.",
+        ),
+        "heating_gate": (
+            "bool",
+            "Apply the heated gate (§3.1).",
+            "On: cold captures carry the warm-up drift into the learned field.",
+        ),
+        "focus_calibration": (
+            "bool",
+            "Correct each refocus stack's focus breathing from its attempts (Fig. 4-1, §3.5.3).",
+            "Off: on handheld stacks the hand's motion dominates the "
+            "same-camera scale; on the bench it made the flow worse "
+            "(median 0.44/0.61/0.74 % → 0.51/0.86/0.91 %). For tripod stacks.",
+        ),
+        "wt_scale": (
+            "bool",
+            "Fit and apply the wide-tele scale in the ROI / over the faces "
+            "(§3.5.1): the focus breathing of this capture.",
+            "On: without it each capture's breathing is an error of its own.",
+        ),
+        "canonical": (
+            "bool",
+            "Canonical rectification (§3.3); off = tele-to-wide (ablation).",
+            "On: the thesis's best mode; the store's pixels live in it.",
+        ),
+        "orientation_buckets": (
+            "bool",
+            "Learn and apply a separate correction per orientation (§3.4).",
+            "On: gravity sags the module differently per orientation.",
+        ),
+        "learned_correction": (
+            "bool",
+            "Apply the correction learned from faces (§3.6).",
+            "On: it is the point of the learning phase.",
+        ),
+        "lookup": (
+            "name",
+            "How the learned correction is looked up: 'field' (smooth "
+            "polynomial over the sensor) or Figure 3-31's nearest/mean/max/min/centre.",
+            "'field': lowest error on the bench, uses every observation.",
+        ),
+        "min_observations": (
+            "count",
+            "Learned gate: fewest observations in the capture's "
+            "orientation bucket to apply a correction.",
+            "10: below that the field's fit is not trusted.",
+        ),
+        "field_max_degree": (
+            "0..3",
+            "Highest polynomial degree over the sensor the smooth "
+            "field may choose (it picks the lowest that fits).",
+            "3: enough for the distortion residue the bench shows.",
+        ),
+    },
+    "roi": {
+        "expand": (
+            "factor ≥ 1",
+            "ROI expansion per side for the second majority vote (Fig. 4-2).",
+            "1.6: more matches on the same surface, still local.",
+        ),
+        "z_min_m": (
+            "m",
+            "Nearest depth searched; sets the largest disparity.",
+            "0.4 m: the closest a phone's tele focuses.",
+        ),
+        "majority_bin_px": (
+            "px",
+            "Histogram bin of the majority-disparity vote.",
+            "0.5 px: finer than surfaces' separation, coarser than noise.",
+        ),
+        "majority_tol_px": (
+            "px",
+            "Band kept about the majority disparity (absolute part).",
+            "0.75 px: keeps a slanted surface's spread.",
+        ),
+        "majority_tol_rel": (
+            "fraction",
+            "Band kept about the majority disparity (relative "
+            "part; the larger of the two is used).",
+            "4 %: large disparities (near objects) spread more.",
+        ),
+        "min_matches": (
+            "count",
+            "Fewest matches on the surface for a measurement.",
+            "12: a 3-parameter plane with a robust margin.",
+        ),
+        "enough_matches": (
+            "count",
+            "With fewer on the surface after blur equalisation the unblurred pair is tried too.",
+            "60: the plane is well fixed above.",
+        ),
+        "map_step_px": (
+            "px",
+            "Grid step of the window's rectification maps (exact on the grid, splines between).",
+            "16 px: < 0.01 px map error, 250× fewer exact evaluations.",
+        ),
+        "coarse_min_zncc": (
+            "ZNCC",
+            "The coarse whole-box correlation must reach this.",
+            "0.5: below it the ROI has no texture or is occluded.",
+        ),
+        "equalise_blur": (
+            "bool",
+            "Blur the sharper image of the window to the other's before the coarse step.",
+            "On: wide and tele differ in blur.",
+        ),
+        "coarse_rows": (
+            "px",
+            "Rows searched either side in the coarse correlation.",
+            "8 px: covers the row error of a factory calibration after warm-up.",
+        ),
+        "coarse_expand": (
+            "factor",
+            "The coarse box is the ROI expanded this much.",
+            "3: repetitive texture needs context to be unambiguous.",
+        ),
+        "max_ambiguity": (
+            "ratio",
+            "A second coarse peak (> 2 px away) above this × the "
+            "first fails the measurement as ambiguous.",
+            "0.97: only near-equal peaks are ambiguous.",
+        ),
+        "fine_range_px": (
+            "px",
+            "The fine search is ± this around the coarse disparity.",
+            "3 px: the coarse step is good to ~1 px.",
+        ),
+    },
+    "match": {
+        "detector": (
+            "name",
+            "Keypoint detector: 'dog' or 'sift'.",
+            "'dog': faster, as accurate on the bench.",
+        ),
+        "max_keypoints": (
+            "count",
+            "Keypoints searched (strongest first, spread over 8×8 px cells).",
+            "Flow: 450 (median 0.37-0.58 %, ~53 ms per capture vs "
+            "~130 ms at 1200); matcher alone: 2000.",
+        ),
+        "dog_sigma": ("px", "DoG inner scale.", "1.0 px: the finest stable texture."),
+        "dog_k": ("ratio", "DoG scale ratio.", "1.6: Lowe's approximation of the LoG."),
+        "contrast": (
+            "noise σ",
+            "Minimum |DoG| in units of its noise σ.",
+            "5: keeps keypoints well above noise.",
+        ),
+        "edge_ratio": (
+            "ratio",
+            "Lowe's edge ratio (edges are poorly localised along them).",
+            "10: Lowe's value.",
+        ),
+        "radius": (
+            "px",
+            "Window half size of the NCC search and sub-pixel fit.",
+            "7 px (15×15): best accuracy/robustness on Middlebury.",
+        ),
+        "sigma_w": (
+            "px",
+            "Gaussian weight σ of the sub-pixel window.",
+            "3 px: centre-weighted, so the fit is local.",
+        ),
+        "row_tolerance": (
+            "px",
+            "Rows searched either side of the epipolar row.",
+            "3 px: the rectification residue of a phone rig.",
+        ),
+        "min_score": ("NCC", "NCC peak must reach this.", "0.8: rejects wrong matches."),
+        "uniqueness": (
+            "ratio",
+            "Second-best NCC peak elsewhere in the band must be below this × the peak.",
+            "0.9: rejects repetitive-texture matches.",
+        ),
+        "min_curvature": (
+            "1/px²",
+            "−∂²NCC/∂x² (and ∂y²) at the peak must reach this.",
+            "0.01: flat peaks are poorly localised.",
+        ),
+        "lr_check": (
+            "bool",
+            "Left-right consistency check.",
+            "Matcher: on; flow: off (after the coarse step the ±3 px search is unambiguous).",
+        ),
+        "lr_tolerance": ("px", "Tolerance of the left-right check.", "1 px."),
+        "slant": (
+            "bool",
+            "Fit the disparity gradient in the window.",
+            "Matcher: on (Piano 0.065 vs 0.072 px); flow: off (planar ROI, faster).",
+        ),
+        "max_slant": ("px/px", "Bound of the fitted disparity gradient.", "0.5."),
+        "max_iter": (
+            "count",
+            "Gauss-Newton iterations of the sub-pixel fit.",
+            "10: converges in 3-5.",
+        ),
+        "tol": ("px", "Convergence threshold of the sub-pixel fit.", "1e-3 px."),
+        "max_shift": (
+            "px",
+            "|sub-pixel − parabola start| allowed in d and e.",
+            "0.7 px: a larger move means the fit left the peak.",
+        ),
+        "max_normalized_residual": (
+            "ratio",
+            "Residual σ / window σ (≈ √(1 − ZNCC²)) allowed after the fit.",
+            "Matcher: 0.2; flow: 0.35 (wide and tele optics differ, windows never fit to noise).",
+        ),
+        "max_residual_ratio": (
+            "ratio",
+            "Residual σ / noise σ allowed.",
+            "Matcher: 4; flow: off (1e9) for the same reason.",
+        ),
+        "max_sigma_d": ("px", "Largest σ_d kept.", "0.25 px: worse matches add nothing."),
+        "e_floor_px": (
+            "px",
+            "Row-error filter floor: |e − affine fit| ≤ max(floor, k·σ_MAD).",
+            "0.5 px.",
+        ),
+        "e_k_mad": ("σ_MAD", "Row-error filter multiple.", "5: only gross outliers."),
+        "hist_bin_px": ("px", "Histogram filter bin.", "1 px."),
+        "hist_min_count": ("count", "Histogram filter: fewest matches in a bin.", "3."),
+        "support_k": ("count", "Neighbours of the support filter.", "8."),
+        "support_tol_px": ("px", "Neighbour disparity tolerance of the support filter.", "1 px."),
+        "min_support": ("count", "Neighbours that must agree (0 disables the filter).", "1."),
+        "noise_sigma": (
+            "DN or null",
+            "Per-pixel image noise σ; null: estimated per image.",
+            "null: phones differ.",
+        ),
+        "residual_sigma": (
+            "bool",
+            "σ_d from max(noise, residual misfit) (on) or from the noise alone (pure Cramér-Rao).",
+            "On: honest σ on real optics.",
+        ),
+        "equalise_blur": (
+            "bool",
+            "Equalise the pair's blur before the sub-pixel fit.",
+            "On: wide and tele differ in blur.",
+        ),
+        "min_blur_misfit": (
+            "noise variances",
+            "Equalise only when the blur difference adds at least this to a window's residual.",
+            "1.0: unblurred pairs measure ≤ 0.35, 0.5 px blur 3.7-8.8.",
+        ),
+    },
+}
+
+__all__ = ["KNOBS"]
