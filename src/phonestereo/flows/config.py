@@ -125,7 +125,14 @@ class FlowConfig:
 
 
 #: Knobs used only when applying a store: changing them does not invalidate what was learned.
-APPLY_ONLY = ("learned_correction", "lookup", "min_observations", "field_max_degree")
+APPLY_ONLY = (
+    "learned_correction",
+    "lookup",
+    "min_observations",
+    "field_max_degree",
+    "focal_rel_sigma",
+    "max_relative_sigma",
+)
 
 ALL_BUCKETS = "all"
 

@@ -72,6 +72,20 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "field may choose (it picks the lowest that fits).",
             "3: enough for the distortion residue the bench shows.",
         ),
+        "focal_rel_sigma": (
+            "relative",
+            "σ of the wide's focal length at the working focus: a systematic (common-mode) "
+            "part of the learned correction's σ (learning/extent.py).",
+            "0.4 %: the IPD ruler through the factory wide model reads 0.35–0.43 % long on "
+            "the bench; a store cannot see this error in its own scatter.",
+        ),
+        "max_relative_sigma": (
+            "relative",
+            "Extrapolation gate: a depth whose σ/Z exceeds this lies beyond what was learned "
+            "and is gated with the reason instead of answered.",
+            "5 %: an order above the learned flow's error inside its range, so only captures "
+            "far outside the learned disparities are gated.",
+        ),
     },
     "roi": {
         "expand": (
