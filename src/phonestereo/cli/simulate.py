@@ -59,6 +59,7 @@ def _summary(spec: ModuleSpec, plan: Any, result: Any, seconds: float) -> dict[s
             plan.captures[-1].state.conditions.time_s,
         ],
         "effects_off": [n for n in EFFECT_NAMES if not getattr(spec.effects, n)],
+        "plan_notes": list(plan.notes),
         "seconds": round(seconds, 2),
     }
 

@@ -136,8 +136,10 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
         return ModuleRanges.model_validate(base)
     except ValidationError as err:
         msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())
-        raise InputError(f"ranges are invalid ({msgs}); the keys and defaults are in "
-                         f"phonestereo/sim/{RANGES_FILE} (docs/module-random.md)") from None
+        raise InputError(
+            f"ranges are invalid ({msgs}); the keys and defaults are in "
+            f"phonestereo/sim/{RANGES_FILE} (docs/module-random.md)"
+        ) from None
 
 
 def _u(rng: np.random.Generator, pair: Pair) -> float:
@@ -220,7 +222,11 @@ def random_module(seed: int, ranges: ModuleRanges | None = None) -> ModuleSpec:
         )
     base = load_module("folded-x3").model_dump(mode="json")
     size = optics["size"]
-    b, phi, tz = _u(rng, r.baseline_mm), np.deg2rad(_u(rng, r.baseline_direction_deg)), _u(rng, r.tz_mm)
+    b, phi, tz = (
+        _u(rng, r.baseline_mm),
+        np.deg2rad(_u(rng, r.baseline_direction_deg)),
+        _u(rng, r.tz_mm),
+    )
     rot = rng.uniform(-r.rotation_deg, r.rotation_deg, size=3)
     noise, k = base["calibration"]["noise"], _u(rng, r.factory_noise_scale)
     temperature = bool(rng.uniform() < r.temperature_reported_probability)
@@ -258,7 +264,8 @@ def _describe(data: dict[str, Any], ratio: float, noise_scale: float) -> str:
         f"{t['pixel_pitch_um']:.2f} um), wide f {w['focal_length_mm']:.2f} mm "
         f"f/{w['f_number']} {w['pixel_pitch_um']:.2f} um, {w['size'][0]}x{w['size'][1]} px; "
         f"baseline {np.hypot(ex[0], ex[1]):.1f} mm, t_z {ex[2]:.1f} mm; factory noise "
-        f"x{noise_scale:.2f}; temperature {'reported' if data['reports']['temperature'] else 'not reported'}."
+        f"x{noise_scale:.2f}; temperature {'' if data['reports']['temperature'] else 'not '}"
+        "reported."
     )
 
 
