@@ -7,6 +7,7 @@ builds the whole app.
 from __future__ import annotations
 
 from phonestereo.cli import analyze as _analyze  # noqa: F401  (registers commands)
+from phonestereo.cli import bench_modules as _bench_modules  # noqa: F401
 from phonestereo.cli import calibrate as _calibrate  # noqa: F401
 from phonestereo.cli import charts as _charts  # noqa: F401
 from phonestereo.cli import demo as _demo  # noqa: F401
