@@ -340,6 +340,11 @@ def measure_roi(
     # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
     # (a chessboard's period is inside the disparity range) needs the context around it.
     d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+    if not peak >= cfg.coarse_min_zncc and cbox != box:
+        # A long tele (×5: a fifth of the wide's field) or a diagonal baseline (the rectified
+        # box of a rotated ROI) may not see the whole context box: retry on the ROI box alone.
+        d0, peak, second, e0 = coarse_disparity(lw, rt, box, -2, d_max, rows=cfg.coarse_rows)
+        counts["coarse_context_dropped"] = 1
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
     if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
         return _fail(
