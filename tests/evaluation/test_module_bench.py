@@ -26,7 +26,8 @@ def _fake_row(seed: int, ranges: dict[str, Any], work: str, keep_images: bool) -
     Path(work).mkdir(parents=True, exist_ok=True)
     good = seed % 2 == 0
     return {
-        "seed": seed, "module": f"random-{seed}", "focal_ratio": 2.0 + seed % 5, "size": "2000x1500",
+        "seed": seed, "module": f"random-{seed}", "focal_ratio": 2.0 + seed % 5,
+        "size": "2000x1500",
         "median_rel_err": 0.004 if good else 0.02, "p90_rel_err": 0.01 if good else 0.05,
         "within_sigma": 0.7 if good else 0.3, "captures": 10, "measured": 9 if good else 6,
         "gated": 1 if good else 4, "gate_reasons": json.dumps({"measure: ZNCC": 1 if good else 4}),
