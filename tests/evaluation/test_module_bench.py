@@ -74,3 +74,13 @@ def test_bench_rows_distribution_figure_and_resume(tmp_path, monkeypatch) -> Non
 def test_cli_bad_seeds_exit_2(tmp_path) -> None:
     r = CliRunner().invoke(app, ["bench", "modules", "--seeds", "9-3", "--out", str(tmp_path)])
     assert r.exit_code == 2 and "--seeds" in r.output
+
+
+def test_cli_bad_ranges_exit_2_before_any_work(tmp_path) -> None:
+    bad = tmp_path / "r.json"
+    bad.write_text('{"baseline_mm": [30, 10]}')
+    out = tmp_path / "out"
+    args = ["bench", "modules", "--seeds", "1", "--ranges", str(bad), "--out", str(out)]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 2 and "baseline_mm" in r.output
+    assert not out.exists()

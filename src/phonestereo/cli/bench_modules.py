@@ -19,6 +19,7 @@ from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar, _fail
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
+from phonestereo.sim.random_module import load_ranges
 
 bench_app = typer.Typer(
     help="Benches over many simulated modules (`bench modules --seeds 1000-1019`).",
@@ -66,6 +67,7 @@ def bench_modules(
     console = Console(stderr=True)
     try:
         seed_list = parse_seeds(seeds)
+        load_ranges(ranges)  # checked before the cluster starts
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, "modules", as_json) as bar:
