@@ -2,7 +2,7 @@
 
 Usage: ``.venv/bin/python benchmarks/run_all.py [NAME ...]`` (names without ``bench_``/``.py``).
 Each script measures speed as seconds or as a ratio against the obvious alternative in the same
-run (DESIGN §10); this runner only collects their JSON lines.
+run (docs/architecture.md); this runner only collects their JSON lines.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The layers and the ground-truth wall of DESIGN §3, enforced."""
+"""The layers and the ground-truth wall of docs/architecture.md, enforced."""
 
 from __future__ import annotations
 

@@ -1,12 +1,12 @@
 """Build the face-chart portraits and their pupil table (run once; output is committed).
 
 Reads the CC0 portraits (default ``/work/shared/data/faces``), writes downscaled copies into
-``src/phonestereo/charts/data/faces/`` (JPEG q95), copies ``LICENSES.md`` with a note on the
-change, and writes ``pupils.json``: for each portrait the iris centres (MediaPipe FaceMesh,
-``refine_landmarks=True``, static image mode, landmarks 468 and 473) and the eye-contour
-centroids (mean of the 16 contour landmarks of each eye), in the pixel convention of DESIGN §5
-((0, 0) is the centre of the top-left pixel; MediaPipe's ``x · width`` has 0 at the left *edge*,
-so 0.5 is subtracted). Eye 0 is the one on the left of the image (the subject's right eye).
+``src/phonestereo/charts/data/faces/`` (JPEG q95), copies ``LICENSES.md`` with a note on the change,
+and writes ``pupils.json``: for each portrait the iris centres (MediaPipe FaceMesh,
+``refine_landmarks=True``, static image mode, landmarks 468 and 473) and the eye-contour centroids
+(mean of the 16 contour landmarks of each eye), in the pixel convention of docs/conventions.md ((0,
+0) is the centre of the top-left pixel; MediaPipe's ``x · width`` has 0 at the left *edge*, so 0.5
+is subtracted). Eye 0 is the one on the left of the image (the subject's right eye).
 
 The landmarks are located on the *shipped* (downscaled, re-encoded) images, so the table matches
 the pixels the chart samples; the full-resolution originals are located too and, mapped to the
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no *.jpg in {args.src}", file=sys.stderr)
         return 2
     table: dict[str, object] = {
-        "convention": "pixels (x, y), (0, 0) = centre of the top-left pixel (DESIGN §5); "
+        "convention": "pixels (x, y), (0, 0) = centre of the top-left pixel (docs/conventions.md); "
         "eye 0 = image left (subject's right eye)",
         "method": "MediaPipe FaceMesh 0.10.21, refine_landmarks=True, static_image_mode=True; "
         "iris = landmarks 468/473, contour = mean of FACEMESH_RIGHT_EYE/LEFT_EYE vertices",

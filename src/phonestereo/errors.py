@@ -1,4 +1,4 @@
-"""Typed errors of phonestereo (DESIGN §5).
+"""Typed errors of phonestereo (docs/conventions.md).
 
 Bad input raises one of these with a message that says what to do. A failure caused by the
 data (no chart found, too few faces) is *not* an exception: it is a result with a reason.

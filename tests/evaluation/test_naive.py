@@ -1,5 +1,6 @@
 """The naive pipeline of thesis §3 (intro) and the acceptance figure of the virtual module:
-naive Z = f·B/d on the factory calibration is ~30 % off at 1–4 m on folded-x3 (DESIGN §6)."""
+naive Z = f·B/d on the factory calibration is ~30 % off at 1–4 m on folded-x3
+(docs/architecture.md)."""
 
 from __future__ import annotations
 
@@ -77,7 +78,7 @@ def _median_error(spec, seed: int) -> float:
 
 
 def test_naive_depth_error_is_thesis_like_on_folded_x3() -> None:
-    """DESIGN §6 acceptance: 20–40 % median relative error at 1–4 m (thesis ~30 %).
+    """docs/architecture.md acceptance: 20–40 % median relative error at 1–4 m (thesis ~30 %).
 
     Per seed (one simulated phone each) the figure varies with the factory-calibration noise:
     seeds 0–9 give 26.1–35.3 % (median 31.7 %); two seeds are checked here."""

@@ -130,7 +130,8 @@ def test_analytic_bench_ideal_module_is_exact(spec) -> None:
 
 def test_analytic_bench_lands_near_thesis_error(spec) -> None:
     out = analytic_bench(spec, 0)
-    # DESIGN §6: naive error near the thesis's ~30 % at 1-4 m (measured 23 % median, 38 % p90)
+    # docs/architecture.md: naive error near the thesis's ~30 % at 1-4 m
+    # (measured 23 % median, 38 % p90)
     assert 0.15 < out["median_rel_err"] < 0.40
     assert out["p90_rel_err"] > out["median_rel_err"]
     assert out["n_points"] == 9 * 63  # 9 distances, a 9x7 grid, every point seen by both

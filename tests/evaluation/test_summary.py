@@ -19,7 +19,7 @@ def test_naive_stage_scored_per_distance(tmp_path: Path) -> None:
     scores = score_capture_set(tmp_path)
     assert scores["captures"] == 6
     naive = scores["stages"]["naive"]
-    # DESIGN §6: the naive formula on the factory calibration is ~30 % off at 1–4 m.
+    # docs/architecture.md: the naive formula on the factory calibration is ~30 % off at 1–4 m.
     assert 0.1 < naive["median_rel_err"] < 0.5
     per = {
         row["distance_m"]: row["stages"]["naive"]["median_rel_err"]

@@ -67,7 +67,7 @@ def test_recovers_subpixel_corners_of_an_area_sampled_board(angle: float) -> Non
         assert res.ok.all()
         errs.append(res.points - corners)
     rms = float(np.sqrt(np.mean(np.concatenate(errs) ** 2)))
-    # The renderer budget of DESIGN §6 is 0.02 px; the refiner must not eat it alone.
+    # The renderer budget of docs/architecture.md is 0.02 px; the refiner must not eat it alone.
     assert rms < 0.01, rms
 
 

@@ -76,7 +76,7 @@ def test_noise_free_render_gives_every_corner_labelled_within_0_02_px(wide) -> N
     assert len(det.ids) == len(truth)  # the whole chart is in view
     err = np.hypot(*_errors(det, truth).T)
     assert err.max() < 0.1  # no corner mislabelled (a wrong label is off by ≥ 1 square)
-    # DESIGN §6 / issue #3: ≤ 0.02 px RMS on noise-free renders (per coordinate)
+    # docs/architecture.md / issue #3: ≤ 0.02 px RMS on noise-free renders (per coordinate)
     assert np.sqrt(np.mean(_errors(det, truth) ** 2)) < 0.02
     assert det.pairs_found == ("h_dark", "v_light", "v_dark", "h_light")
     assert abs(det.rotation_deg - _u_angle_deg(truth, det.ids)) < 0.5

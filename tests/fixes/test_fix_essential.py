@@ -86,7 +86,7 @@ def test_keep_translation_variant_is_not_exact() -> None:
 
 def test_conditioning_is_reported() -> None:
     """A canonical rig (R = I, t along the baseline only) leaves eq. 9 unsolvable: E₃₃, the
-    2×2 block and half the border are 0 (the warning of DESIGN §2)."""
+    2×2 block and half the border are 0 (the warning of docs/equations.md)."""
     E = essential_from_pose(np.eye(3), [0.0, -0.012, 0.0])
     D = np.diag([1 / 1.01, 1 / 1.01, 1.0])
     r = scales_eq9(E, D @ E @ D)

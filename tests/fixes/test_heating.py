@@ -11,10 +11,10 @@ from phonestereo.errors import InputError, ShapeError
 from phonestereo.fixes.heating import (
     DriftFit,
     HeatingCorrection,
-    WarmupGate,
     drift_rate,
     fit_drift_curve,
 )
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.io import CaptureEntry
 
 TAU_S = 70.0  # the thesis's folded module (saturated after ~3 min)

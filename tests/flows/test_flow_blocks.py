@@ -23,6 +23,7 @@ def _entry(**kw: object) -> CaptureEntry:
         "wide": "w.png",
         "tele": "t.png",
         "time_s": 600.0,
+        "focus_mode": "manual",  # a locked focus (the manifest default is now "unknown")
         "gravity": (0.0, 1.0, 0.0),
         "kind": "verification",
         "roi": (900, 650, 200, 150),

@@ -136,11 +136,11 @@ def test_disparity_depth_conventions_and_sensitivity() -> None:
     # Non-positive disparity or depth: no point in front → NaN, never a negative depth.
     assert np.isnan(depth_from_disparity([0.0, -1.0], 1500.0, 0.012)).all()
     assert np.isnan(disparity_from_depth([0.0, -2.0], 1500.0, 0.012)).all()
-    # DESIGN §2: f = 1500 px, B = 12 mm, Z = 2 m, δd = 0.1 px → δZ/Z = 1.1 %.
+    # docs/equations.md: f = 1500 px, B = 12 mm, Z = 2 m, δd = 0.1 px → δZ/Z = 1.1 %.
     assert float(relative_depth_error(2.0, 1500.0, 0.012, 0.1)) == pytest.approx(0.0111, abs=1e-4)
     # It is the first-order term of the exact change of eq. (4) under a 0.1 px disparity error.
     d = float(disparity_from_depth(2.0, 1500.0, 0.012))
     exact = 2.0 / float(depth_from_disparity(d - 0.1, 1500.0, 0.012)) - 1.0
     assert abs(exact) == pytest.approx(0.0111, rel=0.02)
-    # A 3 px disparity bias at 2 m is already the ~30 % naive error of DESIGN §1 (first order).
+    # A 3 px disparity bias at 2 m is already the ~30 % naive error of docs/index.md (first order).
     assert float(relative_depth_error(2.0, 1500.0, 0.012, 3.0)) == pytest.approx(0.333, abs=1e-3)

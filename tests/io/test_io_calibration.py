@@ -22,7 +22,7 @@ from phonestereo.io import (
 
 
 def folded_x3(lens_tele: str = "radial-odd") -> Calibration:
-    """A calibration like DESIGN §6 folded-x3, with awkward floats to test exact round trips."""
+    """A folded-x3-like calibration, with awkward floats to test exact round trips."""
     wide = Camera(
         (2000, 1500),
         1501.234567891234,

@@ -1,4 +1,4 @@
-"""Capture-set manifest: validation messages name the capture and field (DESIGN §4)."""
+"""Capture-set manifest: validation messages name the capture and field (docs/capture-set.md)."""
 
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def test_valid_entry_parses_with_defaults() -> None:
     assert (c.id, c.gravity, c.focus_mode, c.orientation) == (
         "v03",
         (0.0, 1.0, 0.0),
-        "manual",
+        "unknown",  # issue #17: no silent "manual"; the fixed-focus gate says it is unknown
         None,
     )
     assert m.schema_version == 1 and m.calibration == "calibration.json"

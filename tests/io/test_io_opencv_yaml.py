@@ -116,7 +116,7 @@ def test_import_opencv_sample_names(tmp_path: Path) -> None:
     T = np.array([[-3.33], [0.04], [-0.01]])  # square units
     intr = _write_sample(tmp_path / "intrinsics.yml", M1=K1, D1=D1, M2=K2, D2=D2)
     extr = _write_sample(tmp_path / "extrinsics.yml", R=R, T=T, R1=np.eye(3))
-    with pytest.raises(InputError, match="pass wide_size=\\(width, height\\)"):
+    with pytest.raises(InputError, match="--wide-size WIDTHxHEIGHT"):
         import_opencv_yaml(intr, extr)
     cal = import_opencv_yaml(intr, extr, wide_size=(640, 480), tele_size=(640, 480), t_unit_m=0.025)
     assert cal.rig.wide.lens.coefficients == (-0.27, 0.1, 0.001, -0.002, 0.0)

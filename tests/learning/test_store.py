@@ -1,4 +1,4 @@
-"""The fix store (DESIGN §4): round trips, re-learning, migration, damaged files, bad paths."""
+"""The fix store (docs/fix-store.md): round trips, re-learning, migration, damaged files."""
 
 from __future__ import annotations
 

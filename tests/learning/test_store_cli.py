@@ -1,4 +1,4 @@
-"""`phonestereo store stats|export|vacuum` (DESIGN §4)."""
+"""`phonestereo store stats|export|vacuum` (docs/fix-store.md)."""
 
 from __future__ import annotations
 

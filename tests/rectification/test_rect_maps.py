@@ -38,7 +38,7 @@ def test_coarse_maps_match_the_exact_point_maps(folded: Rig, mode: str, resoluti
     rect = Rectification.from_rig(folded, mode, RectifyOptions(resolution=resolution))
     for role in ("wide", "tele"):
         # Spline on an 8-px grid: measured ≤ 2.5e-4 px, of which 6e-5 is float32 rounding at
-        # ~1000 px; 1e-3 px is 1 % of the thesis's 0.1 px disparity budget (DESIGN §2).
+        # ~1000 px; 1e-3 px is 1 % of the thesis's 0.1 px disparity budget (docs/equations.md).
         assert _map_error(rect, role) <= 1e-3, role
 
 

@@ -124,7 +124,7 @@ def test_disparity_positive_in_front_and_orientation(name: str, mode: str) -> No
     rig = true_rig(name)
     rect = Rectification.from_rig(rig, mode)
     d, _ = rect.disparity(*rig.project(scene_points(rig, 300)))
-    assert np.all(d > 0)  # DESIGN §5: d = x_wide − x_tele > 0 in front
+    assert np.all(d > 0)  # docs/conventions.md: d = x_wide − x_tele > 0 in front
     assert rect.tele_center_rect[0] > 0
     w, h = rect.wide_rect.size
     if name == "folded-x3":  # vertical baseline: turned by 90°, portrait rectified images

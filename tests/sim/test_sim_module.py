@@ -1,4 +1,4 @@
-"""The module spec: presets, user JSON, typed errors for bad input (DESIGN §6)."""
+"""The module spec: presets, user JSON, typed errors for bad input (docs/architecture.md)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,8 @@ def _preset_dict(name: str = "folded-x3") -> dict:
 def test_presets_are_listed_and_load() -> None:
     assert list_presets() == ("folded-x3", "nonfolded-x2", "periscope-x5")
     folded, nonfolded = load_module("folded-x3"), load_module("nonfolded-x2")
-    # DESIGN §6: f ≈ 1500 px wide, 4500 px tele (×3); ×2 tele of 8.4 mm for the non-folded.
+    # docs/architecture.md: f ≈ 1500 px wide, 4500 px tele (×3); ×2 tele of 8.4 mm
+    # for the non-folded.
     assert folded.wide.focal_px_infinity == pytest.approx(1500.0)
     assert folded.tele.focal_px_infinity == pytest.approx(4500.0)
     assert nonfolded.tele.focal_px_infinity / nonfolded.wide.focal_px_infinity == pytest.approx(2)

@@ -1,4 +1,4 @@
-"""Each effect of DESIGN §6 in isolation: magnitudes in the true state and the ground truth."""
+"""Each effect of the virtual module in isolation: magnitudes in the true state and ground truth."""
 
 from __future__ import annotations
 

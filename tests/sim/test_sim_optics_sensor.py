@@ -17,7 +17,7 @@ from phonestereo.sim.optics import (
 )
 from phonestereo.sim.sensor import SensorModel, capture
 
-F_WIDE, F_TELE, PITCH = 4.2e-3, 12.6e-3, 2.8e-6  # folded-x3 (DESIGN §6)
+F_WIDE, F_TELE, PITCH = 4.2e-3, 12.6e-3, 2.8e-6  # folded-x3 (docs/architecture.md)
 
 
 # --- thin lens -------------------------------------------------------------------------------

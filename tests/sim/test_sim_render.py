@@ -1,8 +1,8 @@
 """The renderer of the virtual module (sim/scene.py, sim/render.py, sim/optics.ray_field).
 
-The central claim (DESIGN §6): a noise-free render of a chessboard puts its corners where the
-camera model projects them, to ~0.02 px, since every later sub-pixel claim rests on it. Two
-independent corner estimators check it:
+The central claim (docs/architecture.md): a noise-free render of a chessboard puts its
+corners where the camera model projects them, to ~0.02 px, since every later sub-pixel claim
+rests on it. Two independent corner estimators check it:
 
 * ``edge_fit_corner`` — each of the two edges through a corner is located row by row (or column
   by column) from the area coverage of a run of pixels across it (for an area-sampled step

@@ -1,4 +1,4 @@
-"""Scenario plans and their ground truth, without rendering (DESIGN §6)."""
+"""Scenario plans and their ground truth, without rendering (docs/architecture.md)."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from phonestereo.errors import InputError, ShapeError
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-#: Reflectance of black ink and of white paper: the printable range (DESIGN, brief defaults).
+#: Reflectance of black ink and of white paper: the printable range (project defaults).
 INK_BLACK = 0.05
 PAPER_WHITE = 0.95
 

@@ -12,7 +12,7 @@ changes nothing in uv (the pupils are still ``ipd_m`` apart on the plane).
 
 The shipped portraits (``charts/data/faces``, CC0, see its ``LICENSES.md``) are 600 × 600 px;
 their pupil centres come from MediaPipe FaceMesh iris landmarks (``tools/locate_pupils.py``,
-``pupils.json``, pixel convention of DESIGN §5). Eye 0 is the one on the image left.
+``pupils.json``, pixel convention of docs/conventions.md). Eye 0 is the one on the image left.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ IPD_M = 0.063
 
 @dataclass(frozen=True, eq=False)
 class Portrait:
-    """One shipped portrait and its located eyes (pixels, DESIGN §5).
+    """One shipped portrait and its located eyes (pixels, docs/conventions.md).
 
     Attributes
     ----------
@@ -278,7 +278,7 @@ def _raster_stack(names: tuple[str, ...]) -> Array:
 
 
 def _bilinear(stack: Array, k: Any, x: Array, y: Array) -> Array:
-    """Bilinear sample of image ``k`` of ``stack`` (F, H, W) at pixels (x, y) (DESIGN §5).
+    """Bilinear sample of image ``k`` of ``stack`` (F, H, W) at pixels (x, y) (docs/conventions.md).
 
     Edge pixels extend half a pixel (the portrait's extent); exact float64 weights.
     """

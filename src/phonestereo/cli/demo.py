@@ -1,9 +1,9 @@
-"""`phonestereo demo`: the thesis bench on the virtual module, end to end (DESIGN §10).
+"""`phonestereo demo`: the thesis bench on the virtual module, end to end (docs/architecture.md).
 
-Simulates the thesis bench (learning from the face chart at 1–3 m, verification charts at
-0.8–4 m; heated, manual focus at 1.5 m, handheld) on a built-in module with every effect of
-DESIGN §6, runs the learning and the application phases, and prints the relative depth error
-per distance for each stage — naive Z = f·B/d, the fixes without the learned correction, the
+Simulates the thesis bench (learning from the face chart at 1–3 m, verification charts at 0.8–4 m;
+heated, manual focus at 1.5 m, handheld) on a built-in module with every effect
+(docs/architecture.md), runs the learning and the application phases, and prints the relative depth
+error per distance for each stage — naive Z = f·B/d, the fixes without the learned correction, the
 full flow — beside the Cramér–Rao floor, and writes an HTML report with the figures.
 """
 

@@ -164,7 +164,7 @@ def evaluate(
     report: Annotated[Path | None, typer.Option(help="Write an HTML report here.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
 ) -> None:
-    """Score every stage of the flows against ground truth (the thesis bench, DESIGN §10).
+    """Score every stage of the flows against ground truth (the thesis bench, docs/architecture.md).
 
     Learns from the set's face captures, applies on its verification captures, and prints the
     relative depth error per distance for naive Z = f·B/d, the fixes without the learned

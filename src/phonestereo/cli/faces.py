@@ -39,7 +39,7 @@ def _summary(image: Path, res: FaceResult) -> str:
 def faces(
     image: Annotated[Path, typer.Argument(help="Image file (PNG, JPEG, ...).")],
     as_json: Annotated[
-        bool, typer.Option("--json", help="Print the result as JSON (pixels, DESIGN §5).")
+        bool, typer.Option("--json", help="Print the result as JSON (pixels, docs/conventions.md).")
     ] = False,
     overlay: Annotated[
         Path | None,

@@ -1,4 +1,4 @@
-"""``phonestereo batch`` and ``phonestereo study``: scale-out on Dask (issue #8, DESIGN §9).
+"""``phonestereo batch`` and ``phonestereo study``: scale-out on Dask (docs/architecture.md).
 
 Both run on a local Dask cluster (``--workers`` single-threaded processes) or on a running
 scheduler (``--scheduler ADDRESS``) with the same code; every input is checked before the

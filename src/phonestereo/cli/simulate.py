@@ -1,6 +1,7 @@
 """``phonestereo simulate`` and ``phonestereo module``: the virtual module from the command line.
 
-Each command is a thin wrapper over :mod:`phonestereo.sim` (DESIGN §6): ``simulate`` plans a
+Each command is a thin wrapper over :mod:`phonestereo.sim` (docs/architecture.md):
+``simulate`` plans a
 scenario and writes its capture set (images, manifest.json, calibration.json,
 ground_truth.json); ``module list`` / ``module show`` print the presets and their schema.
 """
@@ -76,6 +77,14 @@ def simulate_command(
     no_images: Annotated[
         bool, typer.Option("--no-images", help="Write the JSON files only (no rendering).")
     ] = False,
+    export: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--export",
+            help="Also write OUT/android or OUT/apple: the set as a phone dump for "
+            "`phonestereo import` (repeatable).",
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Simulate a scenario of the virtual module and write its capture set.
@@ -84,12 +93,20 @@ def simulate_command(
     calibration) and OUT/ground_truth.json (for evaluation only).
 
     Example: phonestereo simulate verification --module folded-x3 --out runs/ver --seed 1
+
+    With --export android (or apple) it also writes OUT/android (OUT/apple): the same captures
+    as the dump a phone capture app writes, for `phonestereo import android OUT/android`.
     """
     if scenario not in SCENARIOS:
         raise typer.BadParameter(
             f"unknown scenario {scenario!r}; choose one of {list(SCENARIOS)}",
             param_hint="SCENARIO",
         )
+    exports = list(dict.fromkeys(export or []))
+    for name in exports:
+        if name not in ("android", "apple"):
+            raise typer.BadParameter(f"unknown export {name!r}; choose android or apple",
+                                     param_hint="--export")  # fmt: skip
     spec = _load(module)
     start = time.perf_counter()
     try:
@@ -117,7 +134,11 @@ def simulate_command(
             )
         except InputError as err:
             raise typer.BadParameter(str(err), param_hint="--out") from err
+    for name in exports:
+        _export(name, out, plan)
     summary = _summary(spec, plan, result, time.perf_counter() - start)
+    if exports:
+        summary["exports"] = [str(out / name) for name in exports]
     if as_json:
         typer.echo(json.dumps(summary, indent=1))
         return
@@ -125,6 +146,19 @@ def simulate_command(
     for key, value in summary.items():
         table.add_row(key, str(value))
     Console().print(table)
+
+
+def _export(name: str, out: Path, plan: Any) -> None:
+    """Write OUT/<name>: the simulated set as an Android or Apple dump."""
+    from phonestereo.sim.export_android import write_android_dump
+    from phonestereo.sim.export_apple import write_apple_dump
+    from phonestereo.sim.writer import IMAGE_DIR
+
+    write = write_android_dump if name == "android" else write_apple_dump
+    try:
+        write(out / name, plan.calibration, plan.manifest(IMAGE_DIR), out)
+    except InputError as err:
+        raise typer.BadParameter(str(err), param_hint="--export") from err
 
 
 @module_app.command("list")

@@ -1,4 +1,4 @@
-"""``phonestereo store stats|export|vacuum FILE``: inspect and maintain a fix store (DESIGN §4).
+"""``phonestereo store stats|export|vacuum FILE``: inspect a fix store (docs/fix-store.md).
 
 Thin wrappers over :class:`phonestereo.learning.store.FixStore`. A store the user can write is
 opened normally (an older schema is migrated, with a ``.v<N>.bak`` copy kept); one they cannot

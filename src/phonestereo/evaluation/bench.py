@@ -1,4 +1,4 @@
-"""The thesis bench (DESIGN §10): learn on face captures, apply on verification captures, score.
+"""The thesis bench (docs/architecture.md): learn on faces, apply on verification captures, score.
 
 For a capture set with face and verification captures (``phonestereo simulate thesis-bench``
 or a user's own set with ``ground_truth.json``), :func:`run_bench`

@@ -72,6 +72,7 @@ def measure_capture(
     cs: CaptureSet, entry: CaptureEntry, rect: Rectification, *, min_corners: int = MIN_CORNERS
 ) -> CaptureMeasurement:
     """Detect the chart in both images of a capture, match corners by id, rectify (px)."""
+    t_s = float("nan") if entry.time_s is None else entry.time_s  # NaN: time not recorded
     dets = [detect_verification_chart(read_gray(p)) for p in cs.image_paths(entry.id)]
     dw, dt = dets
     ids, qw, qt = match_detections(dw, dt)
@@ -81,12 +82,10 @@ def measure_capture(
     if bad:
         z, e2, empty = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2), np.int64)
         return CaptureMeasurement(
-            entry.id, entry.time_s, entry.temperature_c, False, bad[0], empty, e2, e2, z, z
+            entry.id, t_s, entry.temperature_c, False, bad[0], empty, e2, e2, z, z
         )
     d, e = rect.disparity(qw, qt)
-    return CaptureMeasurement(
-        entry.id, entry.time_s, entry.temperature_c, True, "", ids, qw, qt, d, e
-    )
+    return CaptureMeasurement(entry.id, t_s, entry.temperature_c, True, "", ids, qw, qt, d, e)
 
 
 def shared_keys(ms: list[CaptureMeasurement]) -> np.ndarray:

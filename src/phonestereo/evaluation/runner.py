@@ -1,6 +1,6 @@
 """Resumable task runs on Dask: one record file per task, written as each task completes.
 
-The scale-out of DESIGN §9 (batch runs, tolerance studies) is this one function on top of
+The scale-out of docs/architecture.md (batch runs, tolerance studies) is this one function on top of
 ``dask.distributed``: :func:`run_tasks` submits every task whose record is missing with
 ``client.submit`` and collects them with ``as_completed``; each finished task's record (status,
 reason, seconds, result) is written atomically to ``<record_dir>/<key>.json`` at once, so an

@@ -1,4 +1,4 @@
-"""Tolerance studies: Monte Carlo over a module's manufacturing tolerances (DESIGN §9).
+"""Tolerance studies: Monte Carlo over a module's manufacturing tolerances (docs/architecture.md).
 
 Each sample draws the toleranced parameters (:mod:`~phonestereo.evaluation.tolerances`),
 builds the sampled module and runs a bench on it (:mod:`~phonestereo.evaluation.study_bench`)

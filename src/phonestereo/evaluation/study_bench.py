@@ -7,7 +7,7 @@ and ``stages`` (per pipeline stage, the same two numbers).
 
 ``analytic``
     No rendering: the true cameras of every verification capture of a small thesis bench
-    (DESIGN §10: heated, manual focus at 1.5 m, handheld, chart at 0.8–4 m) come from the
+    (docs/architecture.md: heated, manual focus at 1.5 m, handheld, chart at 0.8–4 m) come from the
     simulator's effect functions (:func:`~phonestereo.sim.capture.true_state`), a grid of chart
     points is projected with the true rig, and the naive depth Z = f·B/d is taken with the
     phone's factory calibration (:func:`~phonestereo.evaluation.naive.naive_depth`). Costs a
@@ -130,7 +130,7 @@ def analytic_bench(
 
     Examples
     --------
-    The folded ×3 module lands near the thesis's ~30 % naive error (DESIGN §6):
+    The folded ×3 module lands near the thesis's ~30 % naive error (docs/architecture.md):
 
     >>> from phonestereo.sim.module import load_module
     >>> out = analytic_bench(load_module("folded-x3"), 0)

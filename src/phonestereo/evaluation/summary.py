@@ -1,4 +1,4 @@
-"""Score a simulated capture set against its ground truth, stage by stage (DESIGN §10).
+"""Score a simulated capture set against its ground truth, stage by stage (docs/architecture.md).
 
 Only the naive stage exists so far: Z = f·B/d from the true pixel positions of every chart
 corner and the factory calibration (thesis chapter 3 intro). The fix stages and the full flow

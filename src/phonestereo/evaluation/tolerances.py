@@ -2,7 +2,7 @@
 
 A tolerances file (JSON, or YAML when PyYAML is installed) lists parameters of a
 :class:`~phonestereo.sim.module.ModuleSpec` by their dotted path and a distribution of the
-*offset* from the module's nominal value (DESIGN §9, tolerance studies)::
+*offset* from the module's nominal value (docs/architecture.md, tolerance studies)::
 
     {"schema_version": 1,
      "description": "folded-x3 production spread",

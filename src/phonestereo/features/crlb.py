@@ -1,4 +1,4 @@
-"""Cramér–Rao uncertainty of a window match (DESIGN §9): noise from the images, σ_d per match.
+"""Cramér–Rao uncertainty of a window match (docs/architecture.md): σ_d per match from the images.
 
 Model: left window T(u) = a·R(warp(u; θ)) + b + n(u), n white with variance σ_r² per pixel. For
 two images that both carry sensor noise σ_n, σ_r² = σ_n,L² + a²·σ_n,R² (≈ 2 σ_n²). The

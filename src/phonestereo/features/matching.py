@@ -18,7 +18,7 @@ Stages (each counted in :attr:`MatchResult.counts`):
 5. **global** — non-disparity error field, disparity histogram and neighbour support
    (:mod:`~phonestereo.features.match_filters`).
 
-Conventions (DESIGN §5): left = wide, right = tele, rectified with disparity along x;
+Conventions (docs/conventions.md): left = wide, right = tele, rectified with disparity along x;
 ``d = x_left − x_right``, ``e = y_left − y_right``; (x, y) are left pixels, (0, 0) the centre of
 the top-left pixel.
 """

@@ -1,7 +1,7 @@
 """The image's temporal-noise level as a function of intensity (signal-dependent noise).
 
 Sensor noise is shot noise plus read noise: its variance grows linearly with the signal,
-σ²(I) = a + b·I (DESIGN §6; quantisation adds 1/12 DN² to a). A corner's position noise
+σ²(I) = a + b·I (docs/architecture.md; quantisation adds 1/12 DN² to a). A corner's position noise
 depends on the noise where the corner is (half a black square, half a white one), so one σ
 per image is not enough: the tele of ``folded-x3`` gets 2.3× too small a corner σ from one.
 """

@@ -8,8 +8,8 @@ the right image, so it measures both the disparity ``d`` and the non-disparity e
 
 over the window |u|, |v| ≤ r with Gaussian weights w(u, v) (σ = ``sigma_w``). ``a, b`` absorb a
 gain and offset between the cameras; ``(s_x, s_y)`` is the disparity gradient of a slanted
-surface, so that ``d`` at the window centre is not biased by the slant. Conventions (DESIGN §5):
-``d = x_left − x_right``, ``e = y_left − y_right``.
+surface, so that ``d`` at the window centre is not biased by the slant. Conventions
+(docs/conventions.md): ``d = x_left − x_right``, ``e = y_left − y_right``.
 
 The Jacobian is taken from the left window's own spline gradients (at the solution
 ``a·∂R/∂x·(1 − s_x) = ∂L/∂x``), as in inverse-compositional / ESM alignment: only values of R

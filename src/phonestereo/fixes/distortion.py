@@ -1,6 +1,6 @@
 """Residual distortion (thesis §3.2): odd-degree lens models, undistort-both, the e-axis fix.
 
-Three fixes of DESIGN §7:
+Three fixes of docs/architecture.md:
 
 (a) **Odd-degree radial terms** in the lens model (§3.2 fix 3): calibrate with ``radial-odd``
     instead of the even-only ``opencv5``; the comparison is in

@@ -12,9 +12,9 @@ constant (≈ 70 s on the thesis's folded module, saturated after ~3 min).
 Thesis blocks implemented here:
 
 - :func:`fit_drift_curve` — the drift-curve analysis of §3.1 (A, τ, saturation time);
-- :class:`WarmupGate` — fix option 2 of §3.1 and the "heated" gate of §4.1.1 / §4.1.3 ("Heated
-  modules"): accept a capture only after a warm-up time, or once the measured drift rate of a
-  static scene is small;
+- :class:`~phonestereo.fixes.warmup.WarmupGate` (in :mod:`phonestereo.fixes.warmup`) — fix
+  option 2 of §3.1 and the "heated" gate of §4.1.1 / §4.1.3 ("Heated modules"): accept a capture
+  only after a warm-up time, or once the measured drift rate of a static scene is small;
 - :class:`HeatingCorrection` — fix option 1 of §3.1 / future work of chapter 5, beyond the
   thesis: a time- or temperature-indexed offset that maps a disparity to the warm state.
 
@@ -223,83 +223,6 @@ def drift_rate(t_s: Any, values: Any) -> float:
     if len(t) < 2 or np.ptp(t) == 0:
         return float("nan")
     return round(float(np.polyfit(t, y, 1)[0]), 12)
-
-
-@dataclass(frozen=True)
-class GateResult:
-    """Outcome of a gate: passed or not, and why (thesis §4.1.1)."""
-
-    passed: bool
-    reason: str
-
-
-@dataclass(frozen=True)
-class WarmupGate:
-    """The "heated" gate (thesis §3.1 fix option 2, §4.1.1): warm-up time or drift rate.
-
-    Parameters
-    ----------
-    min_time_s : float or None
-        A capture passes once the camera app has run this long (the thesis uses 3 min = 180 s
-        for its folded module). Default when neither criterion is given.
-    max_drift_rate_px_per_s : float or None
-        A capture passes when the measured drift rate of a static scene (|d mean| per second,
-        :func:`drift_rate`) is at most this — or, with ``fit``, the fitted rate at its time.
-    fit : DriftFit or None
-        A drift curve of this module; gives the rate at any time when none is measured.
-
-    Examples
-    --------
-    >>> gate = WarmupGate(min_time_s=180.0)
-    >>> gate.check({"time_s": 20.0}).passed, gate.check({"time_s": 240.0}).passed
-    (False, True)
-    """
-
-    min_time_s: float | None = None
-    max_drift_rate_px_per_s: float | None = None
-    fit: DriftFit | None = None
-
-    def __post_init__(self) -> None:
-        if self.min_time_s is None and self.max_drift_rate_px_per_s is None:
-            object.__setattr__(self, "min_time_s", 180.0)
-        for name in ("min_time_s", "max_drift_rate_px_per_s"):
-            v = getattr(self, name)
-            if v is not None and (not math.isfinite(v) or v < 0):
-                raise InputError(f"{name} must be a finite number >= 0, got {v}")
-
-    def check(self, capture: Any, *, drift_rate_px_per_s: float | None = None) -> GateResult:
-        """Gate one capture.
-
-        ``capture``: a CaptureEntry, mapping or object with ``time_s`` (seconds since the
-        camera app started). ``drift_rate_px_per_s``: the measured drift rate of a static scene
-        at this capture; without it (or NaN) the rate criterion uses ``fit``, and fails, saying
-        so, if there is none.
-        """
-        t = capture.get("time_s") if isinstance(capture, dict) else getattr(capture, "time_s", None)
-        if t is None or not math.isfinite(float(t)):
-            raise InputError("the capture needs a finite 'time_s' (seconds since app start)")
-        t = float(t)
-        if self.min_time_s is not None and t < self.min_time_s:
-            return GateResult(
-                False, f"not warmed up: {t:.0f} s since start < {self.min_time_s:.0f} s"
-            )
-        if self.max_drift_rate_px_per_s is not None:
-            rate, source = drift_rate_px_per_s, "measured"
-            if rate is not None and not math.isfinite(rate):
-                rate = None  # nothing measured (e.g. first capture): fall back on the fit
-            if rate is None and self.fit is not None and self.fit.ok:
-                rate, source = float(self.fit.rate(t)), "fitted"
-            if rate is None:
-                return GateResult(
-                    False, "no drift rate: measure a static scene (drift_rate) or give a fit"
-                )
-            if abs(rate) > self.max_drift_rate_px_per_s:
-                return GateResult(
-                    False,
-                    f"still drifting: {source} rate {abs(rate):.2g} px/s > "
-                    f"{self.max_drift_rate_px_per_s:.2g} px/s at {t:.0f} s",
-                )
-        return GateResult(True, f"warm at {t:.0f} s")
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@
 Gravity bends the assembled module differently in each device orientation, so the same object
 gives a different disparity when the phone is flipped (Figure 3-11: an offset). The thesis's
 fix: record the gyro/gravity reading when a fix is learned and when it is applied, and use a
-fix only within the orientation it was learned in (DESIGN §7; the "orientation bucket known"
-gate of §4.1.1).
+fix only within the orientation it was learned in (docs/architecture.md;
+the "orientation bucket known" gate of §4.1.1).
 
 Bucket rule (:func:`orientation_bucket`). Gravity ``g`` is a device-frame unit vector; the
 device frame is the wide camera's frame in landscape (x right, y down, z forward, out of the

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from phonestereo.fixes.heating import WarmupGate
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.io import CaptureEntry
 from phonestereo.learning.learn import capture_orientation
 
@@ -30,18 +30,39 @@ class Gate:
 
 
 def heated_gate(entry: CaptureEntry, warmup_s: float) -> Gate:
-    """§3.1: the module must be warm (time since the camera started ≥ ``warmup_s``)."""
+    """§3.1: the module must be warm (time since the camera started ≥ ``warmup_s``).
+
+    A capture without ``time_s`` falls back to the drift-rate check
+    (:meth:`~phonestereo.fixes.warmup.WarmupGate.check`); a capture set holds no measured
+    drift rate, so such a capture is gated out with a reason that names the check and the
+    way out (record ``time_s``).
+    """
     g = WarmupGate(min_time_s=warmup_s).check({"time_s": entry.time_s})
-    return Gate("heated", g.passed, "" if g.passed else f"cold capture: {g.reason}")
+    if g.passed:
+        return Gate("heated", True)
+    prefix = "cold capture: " if entry.time_s is not None else "heating unknown: "
+    return Gate("heated", False, prefix + g.reason)
 
 
 def fixed_focus_gate(entry: CaptureEntry) -> Gate:
-    """§3.5: a manual (locked) focus; an autofocus capture may have refocused anywhere."""
-    if entry.focus_mode != "manual":
+    """§3.5: a manual (locked) focus; an autofocus capture may have refocused anywhere.
+
+    ``focus_mode`` "unknown" (the manifest did not say) is gated out too: a user who leaves it
+    out has not said the focus was locked, and a refocused lens moves the disparity by more
+    than the learned fixes correct (§3.5.2). The reason says to record the mode.
+    """
+    if entry.focus_mode == "auto":
         return Gate(
             "fixed-focus", False,
             "autofocus capture: the lens may sit anywhere (§3.5.2); lock a manual focus",
         )  # fmt: skip
+    if entry.focus_mode != "manual":
+        return Gate(
+            "fixed-focus",
+            False,
+            "focus mode unknown (no 'focus_mode' in the manifest): cannot tell whether the "
+            "focus was locked (§3.5.2); set focus_mode to \"manual\" if it was, or \"auto\"",
+        )
     return Gate("fixed-focus", True)
 
 

@@ -251,7 +251,7 @@ def stack_corrections(
     for members in groups.values():
         if len(members) < 2:
             continue
-        members = sorted(members, key=lambda e: (e.focus_attempt or 0, e.time_s))
+        members = sorted(members, key=lambda e: (e.focus_attempt or 0, e.time_s or 0.0))
         paths = [cs.image_paths(e.id) for e in members]
         wide = [read_gray(p[0]) for p in paths]
         tele = [read_gray(p[1]) for p in paths]

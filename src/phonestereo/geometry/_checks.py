@@ -59,7 +59,7 @@ def require_positive(value: float, name: str, unit: str = "") -> float:
 
 
 def frozen(arr: Array) -> Array:
-    """Return a read-only copy (getters never leak writable internal arrays, DESIGN §5)."""
+    """Return a read-only copy (getters never leak writable arrays, docs/conventions.md)."""
     out = np.array(arr, dtype=np.float64, copy=True)
     out.setflags(write=False)
     return out

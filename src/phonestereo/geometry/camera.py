@@ -1,6 +1,6 @@
 """The pinhole-plus-lens camera (thesis §1.1.1, eq. 1–2).
 
-Pixel convention (DESIGN §5): (x, y) with (0, 0) at the centre of the top-left pixel, so a
+Pixel convention (docs/conventions.md): (x, y) with (0, 0) at the centre of the top-left pixel, so a
 ``w × h`` image spans x ∈ [−0.5, w − 0.5]. Camera frame: x right, y down, z forward.
 """
 

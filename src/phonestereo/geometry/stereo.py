@@ -61,7 +61,7 @@ def relative_depth_error(z: Any, f_px: float, baseline_m: float, sigma_d_px: Any
 
     Examples
     --------
-    >>> round(float(relative_depth_error(2.0, 1500.0, 0.012, 0.1)), 4)   # DESIGN §2: 1.1 %
+    >>> round(float(relative_depth_error(2.0, 1500.0, 0.012, 0.1)), 4)   # docs/equations.md: 1.1 %
     0.0111
     """
     f = require_positive(f_px, "focal length f_px", "pixels")

@@ -1,4 +1,4 @@
-"""Rigid transforms named ``T_a_b`` (maps frame b into frame a; DESIGN §5, thesis eq. 3).
+"""Rigid transforms named ``T_a_b`` (maps frame b into frame a; docs/conventions.md, thesis eq. 3).
 
 ``p_a = T_a_b.apply(p_b) = R · p_b + t`` and ``T_a_c = T_a_b @ T_b_c``.
 """
@@ -16,6 +16,9 @@ from phonestereo.geometry._checks import Array, as_matrix, as_points, frozen
 
 ORTHONORMAL_TOLERANCE = 1e-6
 """Largest max |R·Rᵀ − I| accepted: real files print R with 6–9 significant digits."""
+
+SNAP_TOLERANCE = 1e-12
+"""An R further than this from orthonormal (but within ORTHONORMAL_TOLERANCE) is snapped."""
 
 
 def orthonormality_error(r: Array) -> float:
@@ -67,7 +70,7 @@ class Transform:
                 f"det = +1); max |R·Rᵀ − I| is {dev:.2g} and det {np.linalg.det(r):.6g}: "
                 "check that R was written with at least 6 significant digits"
             )
-        if dev > 1e-12:  # printed with 6–9 digits (OpenCV, Kalibr, phone metadata): snap to SO(3)
+        if dev > SNAP_TOLERANCE:  # printed with 6–9 digits (OpenCV, Kalibr, phones): snap
             r = nearest_rotation(r)
         object.__setattr__(self, "R", frozen(r))
         object.__setattr__(self, "t", frozen(t))

@@ -1,4 +1,4 @@
-"""The factory calibration file ``calibration.json`` (DESIGN §4, thesis §1.3.2).
+"""The factory calibration file ``calibration.json`` (docs/calibration.md, thesis §1.3.2).
 
 It holds both cameras (size, K, lens model name and coefficients), ``T_tele_wide`` (R as 3×3,
 t in metres, p_tele = R·p_wide + t), the conditions the calibration was made under and, when
@@ -258,6 +258,8 @@ def calibration_from_dict(data: Any, source: str = "calibration.json") -> Calibr
         t = np.asarray(_require(t_d, "t", source, "T_tele_wide."), dtype=np.float64)
         if t.shape != (3,):
             raise ShapeError(f"must be 3 numbers in metres, got shape {t.shape}")
+        if not np.all(np.isfinite(t)):
+            raise InputError(f"must be 3 finite numbers in metres, got {t.tolist()}")
     with _field(source, "T_tele_wide.R"):
         T = Transform(R, t)
     with _field(source, "T_tele_wide.t"):
@@ -281,7 +283,8 @@ def calibration_from_dict(data: Any, source: str = "calibration.json") -> Calibr
         if rms is not None and (isinstance(rms, bool) or not isinstance(rms, int | float)):
             raise InputError(f"must be a number of pixels, got {rms!r}")
         Calibration(rig, rms_px=rms)
-    names = d.get("parameter_names", [])
+    names = d.get("parameter_names")
+    names = [] if names is None else names  # null or absent: no covariance names
     with _field(source, "parameter_names"):
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise InputError(f"must be a list of strings, got {names!r}")

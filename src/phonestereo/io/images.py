@@ -1,8 +1,11 @@
 """Reading and writing capture images (8-bit grayscale in, PNG or JPEG out).
 
 Files are read as bytes and decoded with :func:`cv2.imdecode` (so any path the OS accepts
-works) in grayscale mode; PNG is written with a fixed compression level, which makes equal
-images give byte-identical files.
+works) in grayscale mode, **without** applying the EXIF Orientation tag: a calibration
+describes the sensor's pixel grid, and a portrait JPEG turned upright by its EXIF tag would no
+longer be that grid. PNG is written with a fixed compression level, which makes equal images
+give byte-identical files. :func:`image_size` reads only the header (fast checks of a whole
+capture set); :func:`size_mismatch` explains a size that differs from the calibration's.
 
 Examples
 --------
@@ -50,6 +53,8 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
         The file is missing, cannot be decoded or is empty.
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
     if not p.is_file():
         raise InputError(f"image file not found: '{p}'; check the path")
     try:
@@ -58,7 +63,8 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
         raise InputError(f"cannot read image file '{p}': {exc}") from exc
     if data.size == 0:
         raise InputError(f"image file '{p}' is empty (0 bytes); re-export the image")
-    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    # IGNORE_ORIENTATION: the stored pixel grid, as the sensor wrote it (module docstring).
+    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION)
     if img is None:
         raise InputError(
             f"cannot decode image file '{p}' ({data.size} bytes); it is not an image OpenCV "
@@ -67,6 +73,80 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
     if img.size == 0:
         raise InputError(f"image file '{p}' decodes to an empty image")
     return np.ascontiguousarray(img, dtype=np.uint8)
+
+
+def image_size(path: str | os.PathLike[str]) -> tuple[int, int]:
+    """(width, height) of an image file from its header, without decoding the pixels.
+
+    The size is the stored pixel grid (EXIF Orientation is not applied), as :func:`read_gray`
+    returns it.
+
+    Raises
+    ------
+    InputError
+        The file is missing, a folder, or not an image (e.g. a text file named ``.png``).
+    """
+    from PIL import Image, UnidentifiedImageError  # header reader; imported only when used
+
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
+    if not p.is_file():
+        raise InputError(f"image file not found: '{p}'; check the path")
+    try:
+        with Image.open(p) as im:
+            w, h = im.size
+    except (UnidentifiedImageError, OSError, ValueError) as exc:
+        raise InputError(
+            f"'{p}' is not an image file (its header is not PNG, JPEG, TIFF, ...): "
+            "re-export the image, or fix the manifest entry that names it"
+        ) from exc
+    return int(w), int(h)
+
+
+def size_mismatch(
+    size: tuple[int, int], expected: tuple[int, int], what: str, camera: str
+) -> str | None:
+    """The message for an image whose size differs from the calibration's, naming the cause.
+
+    Parameters
+    ----------
+    size, expected : (int, int)
+        (width, height) of the image and of the calibration's camera, pixels.
+    what : str
+        The image, as the user knows it (e.g. "capture 'c001' wide image 'images/w.jpg'").
+    camera : str
+        "wide" or "tele".
+
+    Returns
+    -------
+    str or None
+        None when the sizes agree.
+
+    >>> msg = size_mismatch((1500, 2000), (2000, 1500), "image 'p.jpg'", "wide")
+    >>> msg.split(":")[0], "EXIF orientation" in msg
+    ("image 'p.jpg' is 1500x2000, the calibration's wide camera is 2000x1500", True)
+    """
+    (w, h), (ew, eh) = size, expected
+    if (w, h) == (ew, eh):
+        return None
+    head = f"{what} is {w}x{h}, the calibration's {camera} camera is {ew}x{eh}"
+    if (w, h) == (eh, ew):
+        return (
+            f"{head}: a portrait image whose EXIF orientation a viewer or an export applied? "
+            "Use the file as the camera wrote it (phonestereo ignores the EXIF Orientation "
+            f"tag), or rotate it back to {ew}x{eh}"
+        )
+    if w * eh == h * ew:
+        return (
+            f"{head}: the same aspect ratio, scaled by {w / ew:.4g}; the image was resized, or "
+            "the calibration was made at another resolution: capture at the calibrated "
+            "resolution, or scale the calibration (Camera.scaled)"
+        )
+    return (
+        f"{head}: a crop or another capture mode; capture in the mode the calibration was "
+        "made in, or calibrate this one"
+    )
 
 
 def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int = 95) -> Path:

@@ -1,4 +1,4 @@
-"""Capture sets: a folder with ``manifest.json`` and the images it lists (DESIGN §4).
+"""Capture sets: a folder with ``manifest.json`` and the images it lists (docs/capture-set.md).
 
 A capture is one wide + tele image pair with what the phone reports about it: the time since
 the camera app started (heating, thesis §3.1), gravity or an orientation label (§3.4), the
@@ -12,9 +12,17 @@ rejected with a message naming the capture and the field, e.g.::
 Examples
 --------
 >>> entry = CaptureEntry(id="f01", wide="f01_wide.png", tele="f01_tele.png", time_s=185.0,
-...                      gravity=(0.0, 1.0, 0.0), kind="face")
+...                      gravity=(0.0, 1.0, 0.0), kind="face", focus_mode="manual")
 >>> entry.focus_mode, entry.gravity
 ('manual', (0.0, 1.0, 0.0))
+>>> CaptureEntry(id="f02", wide="w.png", tele="t.png", orientation=" Landscape ",
+...              kind="face").orientation, entry.model_copy(update={"focus_mode": "unknown"}).time_s
+('landscape', 185.0)
+
+Nothing is guessed: a capture without ``focus_mode`` has focus mode "unknown" (the fixed-focus
+gate then says so), one without ``time_s`` has time None (the heating gate falls back to the
+drift-rate check and says so), and an ``orientation`` label must be one of
+:data:`ORIENTATION_BUCKETS` (case and ``_``/space vs ``-`` are normalised).
 """
 
 from __future__ import annotations
@@ -24,33 +32,26 @@ import math
 import os
 from collections import Counter
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath, PureWindowsPath
+from pathlib import Path
 from typing import Any, Literal
 
 import pydantic
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from phonestereo.errors import InputError
+from phonestereo.io.manifest_fields import (
+    ORIENTATION_BUCKETS,
+    normalise_orientation,
+    relative_path,
+)
 
 MANIFEST_NAME = "manifest.json"
 SCHEMA_VERSION = 1
 GRAVITY_TOL = 1e-3
 Vec3 = tuple[float, float, float]
 
-
-def _relative_path(value: str) -> str:
-    if not value.strip():
-        raise ValueError("must be a non-empty path relative to the capture-set folder")
-    if PurePosixPath(value).is_absolute() or PureWindowsPath(value).is_absolute():
-        raise ValueError(
-            f"must be a path relative to the capture-set folder, got absolute path {value!r}; "
-            "move the image into the folder and give its relative path"
-        )
-    return value
-
-
 class CaptureEntry(pydantic.BaseModel):
-    """One wide + tele capture of a capture set (DESIGN §4).
+    """One wide + tele capture of a capture set (docs/capture-set.md).
 
     Attributes
     ----------
@@ -58,19 +59,22 @@ class CaptureEntry(pydantic.BaseModel):
         Unique, non-empty identifier within the set.
     wide, tele : str
         Image paths relative to the capture-set folder.
-    time_s : float
-        Seconds since the camera app started (≥ 0; heating, thesis §3.1).
+    time_s : float or None
+        Seconds since the camera app started (≥ 0; heating, thesis §3.1). None (left out) when
+        unknown: the heating gate then falls back to the drift-rate check.
     gravity : (float, float, float) or None
         Device-frame unit gravity vector (|g| = 1 ± 1e-3).
     orientation : str or None
-        Orientation label ("landscape", "landscape-flipped", ...); gravity or orientation must
-        be given (thesis §3.4).
+        Orientation bucket label, one of :data:`ORIENTATION_BUCKETS` ("landscape",
+        "landscape-flipped", "portrait", ...; case-normalised); gravity or orientation must be
+        given (thesis §3.4).
     kind : {"face", "verification", "scene", "calibration"}
     focus_group : str or None
         Name of the refocus stack this capture belongs to (thesis §3.5.3).
     focus_attempt : int or None
         Index (≥ 0) of the attempt inside the stack.
-    focus_mode : {"manual", "auto"}
+    focus_mode : {"manual", "auto", "unknown"}
+        "unknown" when left out: the fixed-focus gate then gates the capture, saying so.
     focus_position : float or None
         Lens position as reported by the module (may be unreliable).
     temperature_c : float or None
@@ -84,13 +88,13 @@ class CaptureEntry(pydantic.BaseModel):
     id: str
     wide: str
     tele: str
-    time_s: float = Field(ge=0.0)
+    time_s: float | None = Field(default=None, ge=0.0)
     gravity: tuple[float, float, float] | None = None
     orientation: str | None = None
     kind: Literal["face", "verification", "scene", "calibration"]
     focus_group: str | None = None
     focus_attempt: int | None = Field(default=None, ge=0)
-    focus_mode: Literal["manual", "auto"] = "manual"
+    focus_mode: Literal["manual", "auto", "unknown"] = "unknown"
     focus_position: float | None = None
     temperature_c: float | None = None
     roi: tuple[int, int, int, int] | None = None
@@ -105,7 +109,7 @@ class CaptureEntry(pydantic.BaseModel):
     @field_validator("wide", "tele")
     @classmethod
     def _paths(cls, v: str) -> str:
-        return _relative_path(v)
+        return relative_path(v)
 
     @field_validator("gravity")
     @classmethod
@@ -128,6 +132,19 @@ class CaptureEntry(pydantic.BaseModel):
             raise ValueError("must be a non-empty label or be left out")
         return v
 
+    @field_validator("orientation")
+    @classmethod
+    def _bucket(cls, v: str | None) -> str | None:
+        if v is None:
+            return v
+        label = normalise_orientation(v)
+        if label not in ORIENTATION_BUCKETS:
+            raise ValueError(
+                f"unknown orientation {v!r}; use one of {list(ORIENTATION_BUCKETS)}, or give "
+                "'gravity' (the accelerometer's unit vector) instead"
+            )
+        return label
+
     @field_validator("roi")
     @classmethod
     def _roi(cls, v: tuple[int, int, int, int] | None) -> tuple[int, int, int, int] | None:
@@ -146,7 +163,7 @@ class CaptureEntry(pydantic.BaseModel):
 
 
 class Manifest(pydantic.BaseModel):
-    """The ``manifest.json`` of a capture set (DESIGN §4)."""
+    """The ``manifest.json`` of a capture set (docs/capture-set.md)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
@@ -158,7 +175,7 @@ class Manifest(pydantic.BaseModel):
     @field_validator("calibration")
     @classmethod
     def _calibration_path(cls, v: str) -> str:
-        return _relative_path(v)
+        return relative_path(v)
 
     @field_validator("captures")
     @classmethod
@@ -311,7 +328,7 @@ def load_capture_set(folder: str | os.PathLike[str], *, check_images: bool = Tru
     if not manifest_path.is_file():
         raise InputError(
             f"no {MANIFEST_NAME} in '{root}'; a capture set is a folder with {MANIFEST_NAME} "
-            "and the images it lists (DESIGN §4)"
+            "and the images it lists (docs/capture-set.md)"
         )
     try:
         text = manifest_path.read_text(encoding="utf-8")

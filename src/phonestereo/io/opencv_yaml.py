@@ -1,4 +1,4 @@
-"""OpenCV FileStorage YAML import/export of a stereo calibration (DESIGN §4).
+"""OpenCV FileStorage YAML import/export of a stereo calibration (docs/calibration.md).
 
 Export writes the names OpenCV's calibration samples use, with a ``_wide`` / ``_tele`` suffix::
 
@@ -29,6 +29,7 @@ Examples
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,6 +39,7 @@ from numpy.typing import NDArray
 
 from phonestereo.errors import InputError, ShapeError
 from phonestereo.geometry import Camera, LensModel, Rig, Transform, make_lens
+from phonestereo.geometry.transform import SNAP_TOLERANCE, orthonormality_error
 from phonestereo.io.calibration import Calibration, CalibrationConditions, _field
 
 _CAMS = ("wide", "tele")
@@ -175,7 +177,13 @@ class _Reader:
                 "cv2.FileStorage or use export_opencv_yaml"
             )
         src, name, n = found
-        m = n.mat()
+        try:
+            m = n.mat()
+        except cv2.error as exc:  # e.g. rows × cols differs from the number of data elements
+            raise InputError(
+                f"{src}: field '{name}': not a readable opencv-matrix (rows × cols must equal "
+                f"the number of data elements): {str(exc).strip().splitlines()[-1]}"
+            ) from exc
         if m is None:
             raise InputError(f"{src}: field '{name}': must be an opencv-matrix")
         return src, name, np.asarray(m, dtype=np.float64)
@@ -196,8 +204,40 @@ def _size(reader: _Reader, cam: str, given: tuple[int, int] | None) -> tuple[int
         return int(w), int(h)
     raise InputError(
         f"no image size for the {cam} camera in the file (image_width_{cam}, image_height_{cam}); "
-        f"pass {cam}_size=(width, height)"
+        f"give it: --{cam}-size WIDTHxHEIGHT on the command line "
+        f"(in Python: {cam}_size=(width, height))"
     )
+
+
+@dataclass(frozen=True)
+class YamlImport:
+    """An imported OpenCV calibration and what the import changed.
+
+    Attributes
+    ----------
+    calibration : Calibration
+    r_deviation : float
+        max |R·Rᵀ − I| of the file's R as printed (before it was snapped to the nearest
+        rotation; OpenCV prints 8 decimals, so ~1e-8 is normal).
+    """
+
+    calibration: Calibration
+    r_deviation: float
+
+    @property
+    def r_reorthonormalised(self) -> bool:
+        """True when R was replaced by the nearest rotation (SVD)."""
+        return self.r_deviation > SNAP_TOLERANCE
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the import changed, one sentence each (for the user)."""
+        if not self.r_reorthonormalised:
+            return ()
+        return (
+            f"R was orthonormal only to {self.r_deviation:.2g} (max |R·Rᵀ − I|, as printed in "
+            "the file); it was replaced by the nearest rotation (SVD)",
+        )
 
 
 def import_opencv_yaml(
@@ -210,6 +250,30 @@ def import_opencv_yaml(
     first_camera: Literal["wide", "tele"] = "wide",
 ) -> Calibration:
     """Read a stereo calibration from OpenCV FileStorage YAML (or XML/JSON).
+
+    The same as :func:`read_opencv_yaml` (which also says whether R was re-orthonormalised),
+    returning only the calibration.
+    """
+    return read_opencv_yaml(
+        path,
+        extrinsics_path,
+        wide_size=wide_size,
+        tele_size=tele_size,
+        t_unit_m=t_unit_m,
+        first_camera=first_camera,
+    ).calibration
+
+
+def read_opencv_yaml(
+    path: str | os.PathLike[str],
+    extrinsics_path: str | os.PathLike[str] | None = None,
+    *,
+    wide_size: tuple[int, int] | None = None,
+    tele_size: tuple[int, int] | None = None,
+    t_unit_m: float = 1.0,
+    first_camera: Literal["wide", "tele"] = "wide",
+) -> YamlImport:
+    """Read a stereo calibration from OpenCV FileStorage YAML (or XML/JSON), with notes.
 
     Parameters
     ----------
@@ -229,7 +293,8 @@ def import_opencv_yaml(
 
     Returns
     -------
-    Calibration
+    YamlImport
+        The calibration and the deviation of R from a rotation before it was snapped.
 
     Raises
     ------
@@ -238,7 +303,10 @@ def import_opencv_yaml(
         (as :class:`~phonestereo.errors.PhysicsError`) naming the file and field.
     """
     if not np.isfinite(t_unit_m) or t_unit_m <= 0:
-        raise InputError(f"t_unit_m must be a positive number of metres per unit, got {t_unit_m}")
+        raise InputError(
+            f"--t-unit-m (Python: t_unit_m) must be a positive number of metres per unit of T, "
+            f"got {t_unit_m}"
+        )
     paths = [Path(path)] + ([Path(extrinsics_path)] if extrinsics_path is not None else [])
     reader = _Reader(paths)
     try:
@@ -265,6 +333,7 @@ def import_opencv_yaml(
             if R.shape != (3, 3):
                 raise ShapeError(f"must be a 3×3 rotation matrix, got shape {R.shape}")
             transform = Transform(R, np.zeros(3))
+            r_dev = orthonormality_error(R)
         with _field(t_file, "T"):
             if T.size != 3:
                 raise ShapeError(f"must hold 3 numbers, got shape {T.shape}")
@@ -280,6 +349,7 @@ def import_opencv_yaml(
         rms = reader.scalar("rms_px")
         with _field(paths[0].name, "conditions"):
             conditions = CalibrationConditions(**cond)
-        return Calibration(rig, conditions, rms_px=rms if isinstance(rms, float) else None)
+        cal = Calibration(rig, conditions, rms_px=rms if isinstance(rms, float) else None)
+        return YamlImport(cal, r_dev)
     finally:
         reader.close()

@@ -1,4 +1,5 @@
-"""Compare the lookup strategies as thesis Figure 3-31 does, plus the smooth field (DESIGN §9).
+"""Compare the lookup strategies as thesis Figure 3-31 does, plus the smooth field
+(docs/architecture.md).
 
 Corrections learned from one set of observations (faces, §3.6) are applied to a verification
 set whose expected disparity is known independently (chart corners at measured depths): per

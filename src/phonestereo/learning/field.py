@@ -1,4 +1,5 @@
-"""A smooth correction field over the sensor and disparity (DESIGN §9, beyond thesis §3.6).
+"""A smooth correction field over the sensor and disparity (beyond thesis §3.6;
+docs/architecture.md).
 
 Instead of looking up the nearest learned offset, fit
 

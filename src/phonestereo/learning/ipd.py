@@ -1,4 +1,4 @@
-"""The IPD model: faces as a ruler (thesis §3.6, eq. 10 and 11; DESIGN §9 population mode).
+"""The IPD model: faces as a ruler (thesis §3.6, eq. 10 and 11 of docs/equations.md).
 
 **Depth from IPD** (eq. 11): ``Z = f · IPD · cos(yaw) / ipd_px`` (:func:`depth_from_ipd`;
 1 mm of IPD error is 1.6 % of depth); :func:`face_depth` does it exactly on undistorted rays,

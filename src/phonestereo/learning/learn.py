@@ -132,6 +132,12 @@ def learn_capture(
     """
     t0 = time.perf_counter()
     entry = capture_set.get(capture_id)
+    if entry.time_s is None:  # an observation records the heating state it was learned in
+        why = (
+            "no time_s (seconds since the camera app started) in the manifest: an observation "
+            "records the heating state it was learned in; add time_s to learn from this capture"
+        )
+        return LearnResult(entry.id, (), None, why, {"total": time.perf_counter() - t0})
     if images is None:
         path_w, path_t = capture_set.image_paths(capture_id)
         img_w, img_t = read_gray(path_w), read_gray(path_t)

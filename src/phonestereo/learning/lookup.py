@@ -6,7 +6,8 @@ verification-chart corners in five ways (Figure 3-31): the closest learned landm
 (``"min"``) offset, and the offset at the image centre (``"centre"``). Closest was best; the
 centre offset was "promising with a much reduced need for faces". Here each returns a
 :class:`~phonestereo.learning.observation.Correction` with σ, and every lookup is keyed by the
-orientation bucket (§3.4, DESIGN §7): a fix learned in one bucket is never applied in another.
+orientation bucket (§3.4, docs/architecture.md): a fix learned in one bucket is never applied in
+another.
 
 σ per strategy (pixels):
 

@@ -1,4 +1,4 @@
-"""The fix store: learned observations in one SQLite file (DESIGN §4, thesis §3.6).
+"""The fix store: learned observations in one SQLite file (docs/fix-store.md, thesis §3.6).
 
 Durable and shared: WAL journal with ``synchronous=FULL``, one ``BEGIN IMMEDIATE``
 transaction per learned capture (so a writer killed mid-capture leaves every earlier capture
@@ -84,7 +84,7 @@ class StoreStats:
 
 
 class FixStore:
-    """The SQLite file of learned observations (DESIGN §4).
+    """The SQLite file of learned observations (docs/fix-store.md).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The fix store's schema, migrations and SQLite error handling (DESIGN §4).
+"""The fix store's schema, migrations and SQLite error handling (docs/fix-store.md).
 
 Kept apart from :mod:`phonestereo.learning.store` so the schema history reads in one place:
 :data:`MIGRATIONS` entry i takes a file from version i to i + 1 (version 0 = an empty file);

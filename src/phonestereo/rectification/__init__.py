@@ -1,8 +1,8 @@
 """Rectification of a wide/tele pair: the thesis's three modes, for points and images.
 
 Thesis §1.3.3 (``tele-to-wide``), §3.2 fix 2 (``undistort-both``) and §3.3 (``canonical``).
-After rectification d = x_wide − x_tele > 0 in front and e = y_wide − y_tele (DESIGN §5); a
-vertical-baseline module is quarter-turned so its disparity is along x.
+After rectification d = x_wide − x_tele > 0 in front and e = y_wide − y_tele
+(docs/conventions.md); a vertical-baseline module is quarter-turned so its disparity is along x.
 
 >>> from phonestereo.geometry import Camera, Rig, Transform
 >>> wide = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)

@@ -1,9 +1,9 @@
-"""Rectifying rotations and quarter turns (thesis §1.3.3, §3.3; DESIGN §5).
+"""Rectifying rotations and quarter turns (thesis §1.3.3, §3.3; docs/conventions.md).
 
 A rectifying rotation ``R_rect_cam`` maps directions of a camera frame into the rectified frame.
 Both cameras share the rectified orientation, so ``R_rect_tele = R_rect_wide · Rᵀ`` with R the
 rotation of ``T_tele_wide``. After rectification the disparity axis is x and the tele optical
-centre sits on the +x side of the wide, so d = x_wide − x_tele > 0 in front (DESIGN §5).
+centre sits on the +x side of the wide, so d = x_wide − x_tele > 0 in front (docs/conventions.md).
 
 - Rotation-only modes (``tele-to-wide``, ``undistort-both``) keep the wide's orientation up to a
   *quarter turn* about the optical axis: the k·90° turn that brings the image-plane direction of

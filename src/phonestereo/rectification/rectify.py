@@ -1,10 +1,10 @@
 """The :class:`Rectification` of a wide/tele rig in one of the thesis's three modes.
 
-Thesis §1.3.3 (``tele-to-wide``), §3.2 fix 2 (``undistort-both``), §3.3 (``canonical``); the
-modes are described in :mod:`phonestereo.rectification.options`. Conventions (DESIGN §5): after
-rectification d = x_wide − x_tele > 0 in front and e = y_wide − y_tele; the tele centre is on
-the rectified +x axis side. A vertical-baseline module is quarter-turned (its rectified images
-have width and height swapped; :mod:`~phonestereo.rectification.frames`).
+Thesis §1.3.3 (``tele-to-wide``), §3.2 fix 2 (``undistort-both``), §3.3 (``canonical``); the modes
+are described in :mod:`phonestereo.rectification.options`. Conventions (docs/conventions.md): after
+rectification d = x_wide − x_tele > 0 in front and e = y_wide − y_tele; the tele centre is on the
+rectified +x axis side. A vertical-baseline module is quarter-turned (its rectified images have
+width and height swapped; :mod:`~phonestereo.rectification.frames`).
 
 Point rectification is exact (undistort → rotate → project, no resampling) and reproduces what
 each mode's images show, including ``tele-to-wide``'s distortion mismatch: there a tele pixel
@@ -199,7 +199,7 @@ class Rectification:
         Returns
         -------
         d, e : ndarray, shape (...)
-            Rectified pixels; d > 0 in front (DESIGN §5).
+            Rectified pixels; d > 0 in front (docs/conventions.md).
         """
         qw = as_points(q_wide, 2, "q_wide")
         qt = as_points(q_tele, 2, "q_tele")

@@ -1,4 +1,6 @@
-"""The virtual module (DESIGN §6): a wide + tele phone module with every effect of thesis ch. 3.
+"""The virtual module: a wide + tele phone module with every effect of thesis ch. 3.
+
+See docs/architecture.md.
 
 Modules, in the order data flows through them:
 

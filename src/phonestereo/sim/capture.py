@@ -1,4 +1,4 @@
-"""The true per-capture state of the virtual module, and rendering it (DESIGN §6).
+"""The true per-capture state of the virtual module, and rendering it (docs/architecture.md).
 
 :func:`true_state` composes the effects of :mod:`phonestereo.sim.effects` into one frozen
 :class:`CaptureState`: the true wide and tele cameras at this capture (focus breathing, lens

@@ -1,4 +1,6 @@
-"""The effects of the virtual module, each a small pure function with its own switch (DESIGN §6).
+"""The effects of the virtual module, each a small pure function with its own switch.
+
+See docs/architecture.md.
 
 Every function takes the :class:`~phonestereo.sim.module.ModuleSpec` (magnitudes and switches),
 the capture conditions and, where the effect is random, a ``numpy.random.Generator``; it returns

@@ -1,4 +1,4 @@
-"""The factory calibration of the virtual module (DESIGN §6, thesis §1.3.2 and §3 intro).
+"""The factory calibration of the virtual module (docs/architecture.md, thesis §1.3.2 and §3 intro).
 
 What a production line would measure: the true rig at calibration conditions (cold, focus at
 0.6 m, landscape), described with OpenCV's even-order lens model (fitted to the true odd-order

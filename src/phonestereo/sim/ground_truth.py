@@ -1,7 +1,8 @@
 """``ground_truth.json`` of a simulated capture set: schema, builder, writer and reader.
 
 Only :mod:`phonestereo.sim` and :mod:`phonestereo.evaluation` may read it (the ground-truth
-wall of DESIGN §3). Per capture it holds the true state (per-camera focal scale relative to the
+wall of docs/architecture.md).
+Per capture it holds the true state (per-camera focal scale relative to the
 calibration-condition true camera, principal-point shift in pixels, temperature, gravity,
 focus distance, autofocus failure, the true cameras and T_tele_wide, the device pose) and per
 object its keypoints (ids, true wide and tele pixels — NaN where not visible, stored as

@@ -1,4 +1,6 @@
-"""The virtual module's specification: the TRUE rig and the magnitude of every effect (DESIGN §6).
+"""The virtual module's specification: the TRUE rig and the magnitude of every effect.
+
+See docs/architecture.md and docs/module.md.
 
 A :class:`ModuleSpec` is what a preset JSON (``sim/presets/<name>.json``) or a user's JSON file
 holds. It is the ground truth the simulator draws captures from; the pipeline never sees it (it
@@ -222,7 +224,7 @@ class ReportsSpec(BaseModel):
 
 
 class EffectsSpec(BaseModel):
-    """One switch per effect of DESIGN §6 (all on by default)."""
+    """One switch per effect of docs/architecture.md (all on by default)."""
 
     model_config = _STRICT
     focus_breathing: bool = True

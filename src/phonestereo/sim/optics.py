@@ -1,6 +1,6 @@
 """Optics of the virtual module: thin-lens focus breathing and defocus, pixel → ray field.
 
-Thin lens (DESIGN §6, thesis §3.5):
+Thin lens (docs/architecture.md, thesis §3.5):
 
 A lens of focal length ``f`` focused at object distance ``s`` puts the sensor at the image
 distance ``v = f·s / (s − f)`` (thin-lens equation 1/f = 1/s + 1/v). The pinhole focal length in
@@ -12,9 +12,9 @@ moment, ``σ = c / 4`` (a uniform disc of radius R has per-axis variance R²/4).
 
 All distances in metres, measured from the lens; ``inf`` is accepted for object depths.
 
-Lens (DESIGN §6): :func:`ray_field` gives the undistorted ray of every pixel centre (or corner)
-of a camera, the first step of the renderer's inverse mapping; :func:`defocus_composite` blurs
-per-object image layers with their own defocus σ and composites them.
+Lens (docs/architecture.md): :func:`ray_field` gives the undistorted ray of every pixel centre (or
+corner) of a camera, the first step of the renderer's inverse mapping; :func:`defocus_composite`
+blurs per-object image layers with their own defocus σ and composites them.
 """
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""The renderer of the virtual module: planar scenes → area-sampled radiance images (DESIGN §6).
+"""The renderer of the virtual module: planar scenes → area-sampled radiance images.
+
+See docs/architecture.md.
 
 Inverse mapping: pixel → undistorted ray (:func:`~phonestereo.sim.optics.ray_field`, checked to
 < 1e-4 px) → ray ∩ object plane (a homography) → chart uv → ``chart.intensity``; the nearest

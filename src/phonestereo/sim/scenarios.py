@@ -18,7 +18,7 @@ landscape; charts face the device.
                  5-attempt manual-focus stack (§3.6, §4.1.3)
 ``verification`` verification chart at 0.8–4 m, handheld, heated, each a 5-attempt stack
                  with an ROI (§4.1.3)
-``thesis-bench`` learning + verification on one phone (DESIGN §10)
+``thesis-bench`` learning + verification on one phone (docs/architecture.md)
 ``calibration``  tripod, focus locked, heated: a chessboard in many poses, or one shot of
                  the three-plane chart, also named ``calibration-3plane`` (§1.3.2;
                  :mod:`~phonestereo.sim.calib_scenario`)
@@ -165,7 +165,7 @@ class VerificationConfig:
 
 @dataclass(frozen=True)
 class BenchConfig:
-    """The thesis bench (DESIGN §10): learning then verification on one phone."""
+    """The thesis bench (docs/architecture.md): learning then verification on one phone."""
 
     learning: LearningConfig = field(default_factory=LearningConfig)
     verification: VerificationConfig = field(default_factory=VerificationConfig)
@@ -300,7 +300,7 @@ def plan_verification(module: ModuleSpec, seed: int, cfg: VerificationConfig) ->
 
 
 def plan_thesis_bench(module: ModuleSpec, seed: int, cfg: BenchConfig) -> Plan:
-    p = Planner("thesis-bench", module, seed, "learning + verification (DESIGN §10)")
+    p = Planner("thesis-bench", module, seed, "learning + verification (docs/architecture.md)")
     t = _plan_learning(p, module, cfg.learning, cfg.learning.timing.start_s)
     _plan_verification(p, module, cfg.verification, t)
     return p.plan()

@@ -1,4 +1,6 @@
-"""The image sensor of the virtual module: shot + read noise, gain, quantisation, JPEG (DESIGN §6).
+"""The image sensor of the virtual module: shot + read noise, gain, quantisation, JPEG.
+
+See docs/architecture.md.
 
 Model, per pixel of radiance ``ρ ∈ [0, 1]`` (scene reflectance × illumination)::
 

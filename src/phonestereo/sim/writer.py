@@ -1,6 +1,6 @@
 """Write a planned scenario as a capture set: images, manifest, factory calibration, ground truth.
 
-The folder is what a phone app plus a factory would give (DESIGN §4)::
+The folder is what a phone app plus a factory would give (docs/capture-set.md)::
 
     OUT/manifest.json         captures (only what the module reports)
     OUT/calibration.json      the imperfect factory calibration

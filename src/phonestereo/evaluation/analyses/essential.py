@@ -66,7 +66,7 @@ def _groups(cs: CaptureSet, name: str) -> dict[str, list[CaptureEntry]]:
     for c in cs.captures():
         if c.kind == "verification" and c.focus_group is not None:
             groups[c.focus_group].append(c)
-    usable = {k: sorted(v, key=lambda c: (c.focus_attempt or 0, c.time_s))
+    usable = {k: sorted(v, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
               for k, v in groups.items() if len(v) >= MIN_ATTEMPTS}  # fmt: skip
     if not usable:
         raise InputError(

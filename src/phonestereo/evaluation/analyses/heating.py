@@ -43,10 +43,10 @@ from phonestereo.fixes.heating import (
     MIN_SAMPLES,
     DriftFit,
     HeatingCorrection,
-    WarmupGate,
     drift_rate,
     fit_drift_curve,
 )
+from phonestereo.fixes.warmup import WarmupGate
 from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
 from phonestereo.rectification import Rectification
 
@@ -108,7 +108,7 @@ def _gates(t: F64, d: F64, min_time_s: float, max_rate: float) -> list[Any]:
 
 
 def _check_needs(cs: CaptureSet) -> list[CaptureEntry]:
-    caps = [c for c in cs.captures() if c.kind == "verification"]
+    caps = [c for c in cs.captures() if c.kind == "verification" and c.time_s is not None]
     if len({c.time_s for c in caps}) < MIN_SAMPLES:
         raise InputError(
             f"the heating analysis needs >= {MIN_SAMPLES} 'verification' captures of a static "
@@ -116,7 +116,7 @@ def _check_needs(cs: CaptureSet) -> list[CaptureEntry]:
             f"10 min; `phonestereo simulate heating`); {cs.root} has {len(caps)} verification "
             f"capture(s) at {len({c.time_s for c in caps})} distinct time(s)"
         )
-    return sorted(caps, key=lambda c: c.time_s)
+    return sorted(caps, key=lambda c: c.time_s or 0.0)
 
 
 def analyze_heating(

@@ -58,7 +58,7 @@ def stack_entries(cs: CaptureSet, analysis: str, what: str) -> list[CaptureEntry
             f"{what} on a tripod sharing a focus_group (one per focus_attempt), e.g. "
             f"`phonestereo simulate refocus`; {cs.root} has none with >= 2 attempts"
         )
-    return sorted(best, key=lambda c: (c.focus_attempt or 0, c.time_s))
+    return sorted(best, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
 
 
 def focus_check(cs: CaptureSet, caps: list[CaptureEntry]) -> list[dict[str, Any]]:

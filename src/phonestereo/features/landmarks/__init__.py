@@ -1,4 +1,4 @@
-"""Facial landmarks behind one small backend interface (thesis §1.2.3, DESIGN §3).
+"""Facial landmarks behind one small backend interface (thesis §1.2.3, docs/architecture.md).
 
 - :mod:`~phonestereo.features.landmarks.base`: :class:`Face`, :class:`FaceResult`, the
   :class:`LandmarkBackend` interface;

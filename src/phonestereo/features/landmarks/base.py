@@ -1,7 +1,7 @@
 """The landmark backend interface: one image in, a :class:`FaceResult` out (thesis §1.2.3).
 
 Every backend (MediaPipe Face Mesh, OpenFace CSV import, ...) returns the same
-:class:`Face` records, in the pixel convention of DESIGN §5 ((0, 0) is the centre of the
+:class:`Face` records, in the pixel convention of docs/conventions.md ((0, 0) is the centre of the
 top-left pixel, coordinates (x, y)). Eye 0 is always the eye on the image left (the
 subject's right eye on a frontal face).
 

@@ -1,4 +1,4 @@
-"""MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3, DESIGN §11).
+"""MediaPipe Face Mesh with iris landmarks as a landmark backend (thesis §1.2.3).
 
 MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few percent of a
 2000-px image is never found on the full frame. The search therefore runs in two stages:
@@ -11,7 +11,8 @@ MediaPipe's detectors shrink the whole frame to 128 or 192 px, so a face a few p
    a side (area interpolation down, cubic up), and Face Mesh (static images,
    ``refine_landmarks=True``) on it. The mesh nearest the crop centre is mapped back:
    MediaPipe's normalised ``x`` has 0 at the crop's left *edge*, so a crop starting at pixel
-   ``X0`` with side ``S`` maps it to ``X0 − 0.5 + x·S`` (DESIGN §5); ``z`` scales by ``S`` too.
+   ``X0`` with side ``S`` maps it to ``X0 − 0.5 + x·S`` (docs/conventions.md); ``z`` scales
+   by ``S`` too.
 
 Faces found twice (overlapping tiles, neighbouring crops) are merged by pupil midpoint.
 Each face gets its pupils (iris centres), the thesis's eye centres
@@ -48,12 +49,14 @@ from phonestereo.features.landmarks.base import (
 )
 from phonestereo.features.landmarks.eyes import mediapipe_eyes
 from phonestereo.features.landmarks.pose import MAX_YAW_RAD, yaw_from_landmarks
+from phonestereo.features.landmarks.quiet import native_stderr_silenced, quiet_env
 
 Box = tuple[float, float, float, float, float]  # x0, y0, x1, y1 (pixels), score
 
 
 def _solutions() -> Any:
     """``mediapipe.solutions`` (imported lazily: it is slow to import and logs to stderr)."""
+    quiet_env()
     import mediapipe as mp
 
     return mp.solutions
@@ -217,6 +220,11 @@ class MediaPipeBackend(LandmarkBackend):
     def _models(self) -> Iterator[tuple[Any, Any]]:
         # The models are built once per backend and kept (building them costs ~50 ms, more
         # than a face mesh); static-image mode carries no state from one image to the next.
+        # MediaPipe's C++ log lines (graph creation, first runs) are dropped unless verbose.
+        with native_stderr_silenced():
+            yield self._open()
+
+    def _open(self) -> tuple[Any, Any]:
         cached = self.__dict__.get("_open_models")
         if cached is None:
             sol = _solutions()
@@ -231,7 +239,7 @@ class MediaPipeBackend(LandmarkBackend):
             )
             cached = (det, mesh)
             object.__setattr__(self, "_open_models", cached)
-        yield cached
+        return cached
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the open models (they are rebuilt where the copy runs)."""
@@ -244,8 +252,9 @@ class MediaPipeBackend(LandmarkBackend):
         """Release the MediaPipe models (rebuilt on the next call)."""
         cached = self.__dict__.pop("_open_models", None)
         if cached is not None:
-            for m in cached:
-                m.close()
+            with native_stderr_silenced():
+                for m in cached:
+                    m.close()
 
     def detect(self, image: ImageLike) -> FaceResult:
         """Faces of one image (array (H, W) gray / (H, W, 3) BGR uint8, or a path)."""

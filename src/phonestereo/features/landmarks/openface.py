@@ -4,7 +4,7 @@ OpenFace (``FaceLandmarkImg`` for images, ``FeatureExtraction`` for videos) writ
 per face and frame. This module reads:
 
 - ``x_0 … x_67``, ``y_0 … y_67`` (required): the 68 2-D landmarks, pixels. OpenFace uses
-  OpenCV's pixel convention ((0, 0) = centre of the top-left pixel), as DESIGN §5 does;
+  OpenCV's pixel convention ((0, 0) = centre of the top-left pixel), as docs/conventions.md does;
 - ``eye_lmk_x_0 … eye_lmk_x_55``, ``eye_lmk_y_*`` (optional, ``-gaze``): 28 eye-region
   landmarks per eye; the mean of each eye's 8 iris points is its pupil. Without them the
   pupils are the eye-contour centres (``pupil_source = "eye-contour"``);

@@ -1,0 +1,176 @@
+"""The Android dump format (docs/import-android.md) as pydantic schemas.
+
+A capture app writes ``DUMP/session.json`` once per camera session and one
+``DUMP/captures/<name>.json`` per capture, beside the images. Every Camera2 value keeps its
+Camera2 key name (``android.lens.intrinsicCalibration``, ...) and unit; arrays may be JSON
+lists or the comma-separated strings ``Arrays.toString`` prints. Rectangles are
+``android.graphics.Rect`` fields ``[left, top, right, bottom]`` (right and bottom exclusive),
+in the pixel-array coordinates Camera2 reports them in.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+FORMAT_SESSION = "phonestereo-android-session"
+FORMAT_CAPTURE = "phonestereo-android-capture"
+POSE_REFERENCES = {0: "PRIMARY_CAMERA", 1: "GYROSCOPE", 2: "UNDEFINED", 3: "AUTOMOTIVE"}
+
+_STRICT = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False, populate_by_name=True)
+
+
+def _numbers(value: Any, n: int, what: str) -> tuple[float, ...]:
+    if isinstance(value, str):
+        try:
+            value = [float(v) for v in value.strip("[] ").split(",")]
+        except ValueError as exc:
+            raise ValueError(f"not a list of numbers ({exc}); give {n} numbers: {what}") from exc
+    if not isinstance(value, list | tuple):
+        raise ValueError(f"must be a list of {n} numbers ({what}), got {value!r}")
+    if len(value) != n:
+        raise ValueError(f"needs {n} numbers ({what}), got {len(value)}")
+    out = []
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise ValueError(f"{v!r} is not a number ({what})")
+        if not math.isfinite(v):
+            raise ValueError(
+                f"non-finite value {v!r}: the device reported no valid value; re-export the "
+                "dump, or leave the key out where it is optional"
+            )
+        out.append(float(v))
+    return tuple(out)
+
+
+def _rect(value: Any) -> tuple[int, int, int, int]:
+    nums = _numbers(value, 4, "Rect [left, top, right, bottom] in pixels")
+    if any(v != int(v) for v in nums) or nums[2] <= nums[0] or nums[3] <= nums[1]:
+        raise ValueError(
+            f"must be integer [left, top, right, bottom] with right > left and "
+            f"bottom > top, got {list(nums)}"
+        )
+    left, top, right, bottom = (int(v) for v in nums)
+    return left, top, right, bottom
+
+
+class AndroidCharacteristics(BaseModel):
+    """One physical camera's ``CameraCharacteristics`` (keys under their Camera2 names)."""
+
+    model_config = _STRICT
+
+    intrinsic_calibration: tuple[float, ...] = Field(alias="android.lens.intrinsicCalibration")
+    distortion: tuple[float, ...] | None = Field(None, alias="android.lens.distortion")
+    pose_rotation: tuple[float, ...] = Field(alias="android.lens.poseRotation")
+    pose_translation: tuple[float, ...] = Field(alias="android.lens.poseTranslation")
+    pose_reference: int = Field(alias="android.lens.poseReference")
+    active_array: tuple[int, int, int, int] = Field(alias="android.sensor.info.activeArraySize")
+    pre_correction_array: tuple[int, int, int, int] = Field(
+        alias="android.sensor.info.preCorrectionActiveArraySize"
+    )
+    sensor_orientation: Literal[0, 90, 180, 270] = Field(alias="android.sensor.orientation")
+    facing: Literal[1] = Field(1, alias="android.lens.facing")
+    minimum_focus_distance: float | None = Field(
+        None, alias="android.lens.info.minimumFocusDistance", ge=0
+    )
+
+    @field_validator("intrinsic_calibration", mode="before")
+    @classmethod
+    def _k(cls, v: Any) -> tuple[float, ...]:
+        return _numbers(v, 5, "[f_x, f_y, c_x, c_y, s]")
+
+    @field_validator("distortion", mode="before")
+    @classmethod
+    def _d(cls, v: Any) -> tuple[float, ...] | None:
+        return None if v is None else _numbers(v, 5, "[k1, k2, k3, p1, p2]")
+
+    @field_validator("pose_rotation", mode="before")
+    @classmethod
+    def _q(cls, v: Any) -> tuple[float, ...]:
+        q = _numbers(v, 4, "quaternion (x, y, z, w)")
+        norm = math.sqrt(sum(c * c for c in q))
+        if abs(norm - 1.0) > 1e-3:
+            raise ValueError(f"must be a unit quaternion (x, y, z, w), got |q| = {norm:.6g}")
+        return tuple(c / norm for c in q)
+
+    @field_validator("pose_translation", mode="before")
+    @classmethod
+    def _t(cls, v: Any) -> tuple[float, ...]:
+        return _numbers(v, 3, "optical-centre position (x, y, z) in metres")
+
+    @field_validator("pose_reference")
+    @classmethod
+    def _ref(cls, v: int) -> int:
+        if v not in (0, 1):
+            name = POSE_REFERENCES.get(v, "unknown")
+            raise ValueError(
+                f"poseReference {v} ({name}) cannot place the two cameras relative to each "
+                "other; phonestereo accepts PRIMARY_CAMERA (0) or GYROSCOPE (1). Calibrate "
+                "the rig yourself instead (`phonestereo calibrate`) and give that calibration"
+            )
+        return v
+
+    @field_validator("active_array", "pre_correction_array", mode="before")
+    @classmethod
+    def _rects(cls, v: Any) -> tuple[int, int, int, int]:
+        return _rect(v)
+
+
+class AndroidSession(BaseModel):
+    """``session.json``: the session's first frame and each physical camera's characteristics."""
+
+    model_config = _STRICT
+
+    format: Literal["phonestereo-android-session"]
+    version: Literal[1]
+    first_frame_timestamp_ns: int = Field(ge=0)
+    cameras: dict[str, AndroidCharacteristics]
+
+    @field_validator("cameras")
+    @classmethod
+    def _two(cls, v: dict[str, AndroidCharacteristics]) -> dict[str, AndroidCharacteristics]:
+        if len(v) != 2:
+            raise ValueError(
+                f"needs exactly the two physical cameras of the stereo pair, got {sorted(v)}"
+            )
+        return v
+
+
+class AndroidResult(BaseModel):
+    """One physical camera's ``CaptureResult`` values for one capture, and its image."""
+
+    model_config = _STRICT
+
+    image: str
+    sensor_timestamp: int = Field(alias="android.sensor.timestamp", ge=0)
+    af_mode: int = Field(alias="android.control.afMode", ge=0, le=5)
+    focus_distance: float | None = Field(None, alias="android.lens.focusDistance", ge=0)
+    crop_region: tuple[int, int, int, int] | None = Field(None, alias="android.scaler.cropRegion")
+    distortion_correction_mode: Literal[0, 1, 2] = Field(
+        0, alias="android.distortionCorrection.mode"
+    )
+
+    @field_validator("crop_region", mode="before")
+    @classmethod
+    def _crop(cls, v: Any) -> tuple[int, int, int, int] | None:
+        return None if v is None else _rect(v)
+
+
+class AndroidCapture(BaseModel):
+    """``captures/<name>.json``: one capture's results, accelerometer and app-level labels."""
+
+    model_config = _STRICT
+
+    format: Literal["phonestereo-android-capture"]
+    version: Literal[1]
+    id: str = Field(min_length=1)
+    kind: Literal["face", "verification", "scene", "calibration"]
+    accelerometer: tuple[float, float, float] | None = None
+    orientation: str | None = None
+    focus_group: str | None = None
+    focus_attempt: int | None = Field(None, ge=0)
+    temperature_c: float | None = None
+    roi: tuple[int, int, int, int] | None = None
+    cameras: dict[str, AndroidResult]

@@ -1,0 +1,143 @@
+"""Export a simulated capture set as an Android Camera2 dump (docs/import-android.md).
+
+The inverse of :mod:`phonestereo.io.importers.android`, so the importer can be tested on every
+scenario with known truth. The virtual phone is laid out like a real one:
+
+* both cameras face back with ``android.sensor.orientation`` 90, the wide one being the
+  primary camera (``poseReference`` PRIMARY_CAMERA, its position (0, 0, 0)); its rotation from
+  the Android sensor frame is ``R0`` below, the Pixel main camera's (quaternion
+  (−0.7071, 0.7071, 0, 0));
+* the tele's rotation is ``R_tele_wide · R0`` and its position ``R0ᵀ · c`` with ``c`` the tele
+  optical centre in the wide frame;
+* each output image is a half-size resampling of a sensor array twice its size: the wide one
+  of the whole pre-correction array, the tele one of a ``android.scaler.cropRegion`` offset
+  by (40, 30) pixels, so the crop-and-scale conversion is exercised;
+* timestamps are ``first_frame + time_s``; the accelerometer reads ``−9.80665 · R0ᵀ g``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from phonestereo.errors import InputError
+from phonestereo.io import Calibration, Manifest
+from phonestereo.io.importers.android_schema import FORMAT_CAPTURE, FORMAT_SESSION
+from phonestereo.io.importers.common import STANDARD_GRAVITY, image_to_platform_K
+
+R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FIRST_FRAME_NS = 5_000_000_000
+IDS = {"wide": "2", "tele": "4"}
+TELE_CROP_OFFSET = (40, 30)
+
+
+def _quat(R: Any) -> list[float]:
+    return [float(v) for v in Rotation.from_matrix(np.asarray(R)).as_quat()]  # (x, y, z, w)
+
+
+def _characteristics(cal: Calibration, role: str) -> dict[str, Any]:
+    cam = cal.rig.wide if role == "wide" else cal.rig.tele
+    if cam.lens.name != "opencv5":
+        raise InputError(
+            f"the {role} lens model is '{cam.lens.name}'; Android's android.lens.distortion "
+            "holds only the 5-coefficient Brown–Conrady model (opencv5)"
+        )
+    w, h = cam.size
+    ox, oy = (0, 0) if role == "wide" else TELE_CROP_OFFSET
+    pre = [4, 4, 4 + 2 * w + 2 * ox, 4 + 2 * h + 2 * oy]
+    active = [pre[0] + 8, pre[1] + 8, pre[2] - 8, pre[3] - 8]
+    k1, k2, p1, p2, k3 = cam.lens.coefficients
+    if role == "wide":
+        R, c = R0, np.zeros(3)
+    else:
+        T = cal.rig.T_tele_wide
+        R = T.R @ R0
+        c = R0.T @ (-T.R.T @ T.t)
+    return {
+        "android.lens.facing": 1,
+        "android.lens.intrinsicCalibration": image_to_platform_K(cam.K, (ox, oy), (0.5, 0.5)),
+        "android.lens.distortion": [k1, k2, k3, p1, p2],
+        "android.lens.poseRotation": _quat(R),
+        "android.lens.poseTranslation": [float(v) for v in c],
+        "android.lens.poseReference": 0,
+        "android.lens.info.minimumFocusDistance": 10.0,
+        "android.sensor.info.activeArraySize": active,
+        "android.sensor.info.preCorrectionActiveArraySize": pre,
+        "android.sensor.orientation": 90,
+    }
+
+
+def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The dump documents: (session.json, {capture file name: capture JSON})."""
+    session = {
+        "format": FORMAT_SESSION,
+        "version": 1,
+        "first_frame_timestamp_ns": FIRST_FRAME_NS,
+        "cameras": {IDS["tele"]: _characteristics(cal, "tele"),
+                    IDS["wide"]: _characteristics(cal, "wide")},
+    }  # fmt: skip
+    captures = {}
+    for c in manifest.captures:
+        if c.gravity is None:
+            raise InputError(f"capture '{c.id}' has no gravity to export as an accelerometer")
+        acc = -STANDARD_GRAVITY * (R0.T @ np.asarray(c.gravity, dtype=np.float64))
+        cams = {}
+        for role in ("wide", "tele"):
+            cid = IDS[role]
+            src = Path(c.wide if role == "wide" else c.tele)
+            res: dict[str, Any] = {
+                "image": f"images/{c.id}_{cid}{src.suffix}",
+                "android.sensor.timestamp": FIRST_FRAME_NS + round(c.time_s * 1e9),
+                "android.control.afMode": 0 if c.focus_mode == "manual" else 1,
+                "android.distortionCorrection.mode": 0,
+            }
+            if role == "wide" and c.focus_position is not None:
+                res["android.lens.focusDistance"] = c.focus_position
+            if role == "tele":
+                ox, oy = TELE_CROP_OFFSET
+                w, h = cal.rig.tele.size
+                res["android.scaler.cropRegion"] = [ox, oy, ox + 2 * w, oy + 2 * h]
+            cams[cid] = res
+        doc = {
+            "format": FORMAT_CAPTURE,
+            "version": 1,
+            "id": c.id,
+            "kind": c.kind,
+            "accelerometer": [float(v) for v in acc],
+            "focus_group": c.focus_group,
+            "focus_attempt": c.focus_attempt,
+            "temperature_c": c.temperature_c,
+            "roi": list(c.roi) if c.roi is not None else None,
+            "cameras": cams,
+        }
+        captures[f"{c.id}.json"] = {k: v for k, v in doc.items() if v is not None}
+    return session, captures
+
+
+def write_android_dump(
+    folder: str | os.PathLike[str], cal: Calibration, manifest: Manifest, set_root: Path
+) -> Path:
+    """Write the dump into ``folder`` (session.json, captures/, images/ linked from the set)."""
+    out = Path(folder)
+    session, captures = android_dump(cal, manifest)
+    (out / "captures").mkdir(parents=True, exist_ok=True)
+    (out / "images").mkdir(exist_ok=True)
+    (out / "session.json").write_text(json.dumps(session, indent=1) + "\n", encoding="utf-8")
+    for name, doc in captures.items():
+        (out / "captures" / name).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    for c in manifest.captures:
+        for role, rel in (("wide", c.wide), ("tele", c.tele)):
+            src = set_root / rel
+            dst = out / "images" / f"{c.id}_{IDS[role]}{Path(rel).suffix}"
+            if src.is_file() and not dst.exists():
+                try:
+                    os.link(src, dst)
+                except OSError:
+                    shutil.copy2(src, dst)
+    return out
