@@ -25,7 +25,7 @@ def _preset_dict(name: str = "folded-x3") -> dict:
 
 
 def test_presets_are_listed_and_load() -> None:
-    assert list_presets() == ("folded-x3", "nonfolded-x2")
+    assert list_presets() == ("folded-x3", "nonfolded-x2", "periscope-x5")
     folded, nonfolded = load_module("folded-x3"), load_module("nonfolded-x2")
     # docs/architecture.md: f ≈ 1500 px wide, 4500 px tele (×3); ×2 tele of 8.4 mm
     # for the non-folded.

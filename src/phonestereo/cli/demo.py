@@ -98,6 +98,7 @@ def demo(
 
         res = run_bench(out, cfg, ablations=full, lookups=full, progress=progress)
     res["module"] = spec.name
+    res["plan_notes"] = list(plan.notes)  # what was planned for this module, what it cannot see
     report = write_report(res, out / "report.html", title=f"phonestereo demo: {spec.name}")
     res["report"] = str(report)
     res["total_seconds"] = round(time.perf_counter() - t0, 2)
@@ -109,6 +110,8 @@ def demo(
         f"relative depth error per verification capture, {spec.name} "
         f"({len(res['captures'])} captures, {res['learning']['n_observations']} learned faces)",
     )
+    for note in plan.notes:
+        Console().print(f"plan: {note}", soft_wrap=True)
     Console().print(
         f"capture set and report in {out} ({report.name}); {res['total_seconds']:.0f} s in all"
     )

@@ -61,6 +61,7 @@ def _summary(spec: ModuleSpec, plan: Any, result: Any, seconds: float) -> dict[s
             plan.captures[-1].state.conditions.time_s,
         ],
         "effects_off": [n for n in EFFECT_NAMES if not getattr(spec.effects, n)],
+        "plan_notes": list(plan.notes),
         "seconds": round(seconds, 2),
     }
 
@@ -217,3 +218,43 @@ def module_show(
         f"tele centre {list(ex.tele_center_mm)} mm, rotation {list(ex.rotation_deg)} deg; "
         f"calibration at {spec.calibration.focus_distance_m} m focus; effects on: {', '.join(on)}"
     )
+
+
+@module_app.command("random")
+def module_random(
+    seed: Annotated[int, typer.Option("--seed", help="Seed (>= 0): same seed, same module.")],
+    ranges: Annotated[
+        Path | None,
+        typer.Option("--ranges", help="JSON of ranges overriding the shipped ones (any subset)."),
+    ] = None,
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Write the module JSON here.")
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the module JSON (default when no --out).")
+    ] = False,
+) -> None:
+    """Draw a physically consistent random module from documented ranges.
+
+    The ranges (focal ratio 2-6, baseline 8-25 mm in any in-plane direction, t_z 0-6 mm,
+    rotations ±0.6°, 2000x1500 to 4000x3000 px, pitch 0.8-2.8 µm, heating drift 0-7 px, ...)
+    are in docs/module-random.md; `--ranges FILE` overrides any of them. Pass the written
+    file to `simulate --module FILE`, `demo --module FILE`.
+
+    Example: phonestereo module random --seed 1000 --out runs/random-1000.json
+    """
+    from phonestereo.sim.random_module import load_ranges, random_module
+
+    try:
+        spec = random_module(seed, load_ranges(ranges))
+    except InputError as err:
+        Console(stderr=True).print(f"[red]error:[/red] {err}", soft_wrap=True)
+        raise typer.Exit(2) from err
+    text = spec.to_json()
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+    if as_json or out is None:
+        typer.echo(text, nl=False)
+    else:
+        Console().print(f"{spec.description}\nwritten to {out}", soft_wrap=True)

@@ -361,10 +361,16 @@ def measure_roi(
         cboxes = [bbox]
     # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
     # (a chessboard's period is inside the disparity range) needs the context around it.
+    if box not in cboxes:
+        # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
+        # the ROI's own box is the last try.
+        cboxes.append(box)
     for cbox in cboxes:
         d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
         if np.isfinite(d0) and peak >= cfg.coarse_min_zncc and second < cfg.max_ambiguity * peak:
             break
+    if cbox == box and len(cboxes) > 1:
+        counts["coarse_context_dropped"] = 1
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
     if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
         return _fail(

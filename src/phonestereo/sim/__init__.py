@@ -4,7 +4,8 @@ See docs/architecture.md.
 
 Modules, in the order data flows through them:
 
-- :mod:`~phonestereo.sim.module`    the spec: presets ``folded-x3`` / ``nonfolded-x2`` or a JSON
+- :mod:`~phonestereo.sim.module`    the spec: presets ``folded-x3`` / ``nonfolded-x2`` /
+  ``periscope-x5`` or a JSON; :mod:`~phonestereo.sim.random_module` draws random ones
 - :mod:`~phonestereo.sim.effects`   one pure function per effect, each with its switch
 - :mod:`~phonestereo.sim.capture`   the true per-capture state; rendering it
 - :mod:`~phonestereo.sim.factory`   the imperfect factory calibration

@@ -152,6 +152,8 @@ class GroundTruth(BaseModel):
     module: dict[str, Any]
     calibration_true: dict[str, Any]
     captures: list[CaptureTruth]
+    #: The plan's notes: distances/focus re-planned for the module, what it cannot cover.
+    notes: list[str] = []
 
     def capture(self, capture_id: str) -> CaptureTruth:
         """One capture by id (InputError naming the known ids if absent)."""

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from phonestereo.charts.verification import VerificationChart
 from phonestereo.errors import InputError
 from phonestereo.geometry import Transform
 from phonestereo.io import Calibration, CaptureEntry, Manifest
@@ -72,6 +73,8 @@ class Plan:
     calibration: Calibration
     captures: tuple[PlannedCapture, ...]
     description: str = ""
+    #: What the planner changed for this module and what it cannot cover (sim.coverage).
+    notes: tuple[str, ...] = ()
 
     def ground_truth(self) -> GroundTruth:
         """The ground truth of the whole set."""
@@ -81,6 +84,7 @@ class Plan:
             module=self.module.model_dump(mode="json"),
             calibration_true=calibration_rig(self.module).to_dict(),
             captures=[c.truth for c in self.captures],
+            notes=list(self.notes),
         )
 
     def manifest(self, image_dir: str = "images") -> Manifest:
@@ -123,6 +127,7 @@ class Planner:
             description,
         )
         self.captures: list[PlannedCapture] = []
+        self.notes: list[str] = []
         self.layout = stream(seed, scenario, STREAM_LAYOUT)
 
     def add(
@@ -152,9 +157,9 @@ class Planner:
         if len(set(ids)) != len(ids):
             raise InputError(f"scenario {self.scenario!r} planned duplicate capture ids")
         cal = factory_calibration(self.module, stream(self.seed, STREAM_CALIBRATION))
-        return Plan(
-            self.scenario, self.module, self.seed, cal, tuple(self.captures), self.description
-        )
+        caps = tuple(self.captures)
+        return Plan(self.scenario, self.module, self.seed, cal, caps, self.description,
+                    tuple(self.notes))  # fmt: skip
 
 
 def chart_roi(
@@ -229,6 +234,14 @@ def chart_pose(
     from phonestereo.sim.scene import facing_pose
 
     return facing_pose(size_m, distance_m, tilt_rad=tilt_rad, center_m=center_m)
+
+
+def verification_scene(module: ModuleSpec, distance_m: float, tilt: np.ndarray) -> Scene:
+    """The verification chart facing the device at ``distance_m``, tilted by ``tilt`` (rad),
+    centred on the baseline midpoint."""
+    chart = VerificationChart()
+    pose = chart_pose(chart.size_m, distance_m, tilt, baseline_midpoint(module))
+    return Scene((PlanarObject(chart, pose, "chart"),))
 
 
 def baseline_midpoint(module: ModuleSpec) -> tuple[float, float]:

@@ -42,6 +42,8 @@ from phonestereo.sim.calib_scenario import (
     plan_calibration,
 )
 from phonestereo.sim.capture import CaptureConditions
+from phonestereo.sim.coverage import fit_config
+from phonestereo.sim.heating_scenario import HeatingConfig, plan_heating
 from phonestereo.sim.module import ModuleSpec
 from phonestereo.sim.plan import (
     Plan,
@@ -50,6 +52,7 @@ from phonestereo.sim.plan import (
     chart_pose,
     device_pose_towards,
 )
+from phonestereo.sim.plan import verification_scene as _verification_scene
 from phonestereo.sim.scene import PlanarObject, Scene
 
 LANDSCAPE = device_pose_towards((0.0, 0.0))
@@ -63,20 +66,6 @@ class Timing:
     start_s: float = 300.0
     attempt_s: float = 1.5
     group_gap_s: float = 10.0
-
-
-@dataclass(frozen=True)
-class HeatingConfig:
-    """A capture every ``interval_s`` from cold (t = 0) for ``duration_s``, focus locked."""
-
-    distance_m: float = 1.5
-    focus_m: float = 1.5
-    interval_s: float = 10.0
-    duration_s: float = 600.0
-
-    @classmethod
-    def quick(cls) -> HeatingConfig:
-        return cls(interval_s=60.0, duration_s=180.0)
 
 
 @dataclass(frozen=True)
@@ -149,6 +138,7 @@ class LearningConfig:
     focus_m: float = 1.5
     handheld: bool = True
     timing: Timing = Timing()
+    focus_per_distance: bool = False  # each stack focused on its chart (sim.coverage)
 
     @classmethod
     def quick(cls) -> LearningConfig:
@@ -170,6 +160,7 @@ class VerificationConfig:
     tilt_deg: float = 4.0
     roi_jitter: float = 0.0
     timing: Timing = Timing()
+    focus_per_distance: bool = False  # each stack focused on its chart (sim.coverage)
 
     @classmethod
     def quick(cls) -> VerificationConfig:
@@ -189,16 +180,12 @@ class BenchConfig:
 
 
 def _conditions(
-    cid: str, kind: Any, t: float, pose: Any, handheld: bool, cfg: Any, group: Any, k: Any
-) -> CaptureConditions:
+    cid: str, kind: Any, t: float, pose: Any, handheld: bool, cfg: Any, group: Any, k: Any,
+    focus_m: float | None = None,
+) -> CaptureConditions:  # fmt: skip
     mode: Literal["manual", "auto"] = getattr(cfg, "focus_mode", "manual")
-    return CaptureConditions(cid, kind, t, pose, handheld, mode, cfg.focus_m, group, k)
-
-
-def _verification_scene(module: ModuleSpec, distance_m: float, tilt: np.ndarray) -> Scene:
-    chart = VerificationChart()
-    pose = chart_pose(chart.size_m, distance_m, tilt, baseline_midpoint(module))
-    return Scene((PlanarObject(chart, pose, "chart"),))
+    focus = cfg.focus_m if focus_m is None else focus_m
+    return CaptureConditions(cid, kind, t, pose, handheld, mode, focus, group, k)
 
 
 def _stack(
@@ -213,33 +200,13 @@ def _stack(
     handheld: bool = False,
     roi: tuple[int, int] | None = (200, 150),
     roi_jitter: float = 0.0,
+    focus_m: float | None = None,
 ) -> float:
     for k in range(cfg.attempts):
-        conditions = _conditions(f"{group}_{k}", kind, t, pose, handheld, cfg, group, k)
-        p.add(conditions, scene, roi, roi_jitter)
+        c = _conditions(f"{group}_{k}", kind, t, pose, handheld, cfg, group, k, focus_m)
+        p.add(c, scene, roi, roi_jitter)
         t += cfg.timing.attempt_s
     return t + cfg.timing.group_gap_s
-
-
-def plan_heating(module: ModuleSpec, seed: int, cfg: HeatingConfig) -> Plan:
-    p = Planner("heating", module, seed, "tripod, static chart, from cold, focus locked")
-    scene = _verification_scene(module, cfg.distance_m, np.zeros(3))
-    lock = p.layout.normal(size=2)
-    n = int(np.floor(cfg.duration_s / cfg.interval_s + 1e-9)) + 1
-    for i in range(n):
-        t = i * cfg.interval_s
-        c = CaptureConditions(
-            f"h{i:03d}",
-            "verification",
-            t,
-            LANDSCAPE,
-            False,
-            "manual",
-            cfg.focus_m,
-            lens_noise=(float(lock[0]), float(lock[1])),
-        )
-        p.add(c, scene, (200, 150))
-    return p.plan()
 
 
 def plan_refocus(module: ModuleSpec, seed: int, cfg: StackConfig) -> Plan:
@@ -284,6 +251,7 @@ def plan_dual_depth(module: ModuleSpec, seed: int, cfg: DualDepthConfig) -> Plan
 
 
 def _plan_learning(p: Planner, module: ModuleSpec, cfg: LearningConfig, t: float) -> float:
+    cfg = fit_config(cfg, module, "faces", p.notes)
     chart = FaceChart()
     tele = module.tele
     half = (tele.size[0] / 2 / tele.focal_px_infinity, tele.size[1] / 2 / tele.focal_px_infinity)
@@ -308,16 +276,19 @@ def _plan_learning(p: Planner, module: ModuleSpec, cfg: LearningConfig, t: float
                 pose=pose,
                 handheld=cfg.handheld,
                 roi=None,
+                focus_m=d if cfg.focus_per_distance else None,
             )
     return t
 
 
 def _plan_verification(p: Planner, module: ModuleSpec, cfg: VerificationConfig, t: float) -> float:
+    cfg = fit_config(cfg, module, "verification chart", p.notes)
     for i, d in enumerate(cfg.distances_m):
         tilt = p.layout.normal(size=3) * np.deg2rad([cfg.tilt_deg, cfg.tilt_deg, 1.0])
         scene = _verification_scene(module, d, tilt)
+        focus = d if cfg.focus_per_distance else None
         t = _stack(p, scene, cfg, f"V{i:02d}", t, handheld=cfg.handheld, roi=cfg.roi_px,
-                   roi_jitter=cfg.roi_jitter)  # fmt: skip
+                   roi_jitter=cfg.roi_jitter, focus_m=focus)  # fmt: skip
     return t
 
 
