@@ -39,16 +39,11 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError, ShapeError
+from phonestereo.io.manifest_fields import ORIENTATION_BUCKETS
 
-#: Every bucket :func:`orientation_bucket` can return, in the order of the table above.
-BUCKETS: tuple[str, ...] = (
-    "landscape",
-    "landscape-flipped",
-    "portrait",
-    "portrait-flipped",
-    "face-up",
-    "face-down",
-)
+#: Every bucket :func:`orientation_bucket` can return, in the order of the table above (the
+#: labels a manifest accepts, defined once in io beside the manifest's checks).
+BUCKETS: tuple[str, ...] = ORIENTATION_BUCKETS
 _AXIS_ORDER = (1, 0, 2)  # ties broken in the order y, x, z
 _NAMES = {(1, 1): "landscape", (1, -1): "landscape-flipped", (0, 1): "portrait",
           (0, -1): "portrait-flipped", (2, 1): "face-up", (2, -1): "face-down"}  # fmt: skip

@@ -17,9 +17,7 @@ scenario with known truth. The virtual phone is laid out like a real one:
 
 from __future__ import annotations
 
-import json
 import os
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +28,7 @@ from phonestereo.errors import InputError
 from phonestereo.io import Calibration, Manifest
 from phonestereo.io.importers.android_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import STANDARD_GRAVITY, image_to_platform_K
+from phonestereo.sim.export_common import write_dump
 
 R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 FIRST_FRAME_NS = 5_000_000_000
@@ -126,20 +125,5 @@ def write_android_dump(
     folder: str | os.PathLike[str], cal: Calibration, manifest: Manifest, set_root: Path
 ) -> Path:
     """Write the dump into ``folder`` (session.json, captures/, images/ linked from the set)."""
-    out = Path(folder)
     session, captures = android_dump(cal, manifest)
-    (out / "captures").mkdir(parents=True, exist_ok=True)
-    (out / "images").mkdir(exist_ok=True)
-    (out / "session.json").write_text(json.dumps(session, indent=1) + "\n", encoding="utf-8")
-    for name, doc in captures.items():
-        (out / "captures" / name).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    for c in manifest.captures:
-        for role, rel in (("wide", c.wide), ("tele", c.tele)):
-            src = set_root / rel
-            dst = out / "images" / f"{c.id}_{IDS[role]}{Path(rel).suffix}"
-            if src.is_file() and not dst.exists():
-                try:
-                    os.link(src, dst)
-                except OSError:
-                    shutil.copy2(src, dst)
-    return out
+    return write_dump(folder, session, captures, manifest, set_root, IDS)

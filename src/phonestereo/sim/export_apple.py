@@ -18,9 +18,7 @@ The inverse of :mod:`phonestereo.io.importers.apple`. The virtual iPhone:
 
 from __future__ import annotations
 
-import json
 import os
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +32,7 @@ from phonestereo.io.importers.apple import R_BACK
 from phonestereo.io.importers.apple_lut import apple_distort, image_grid, r_max
 from phonestereo.io.importers.apple_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import image_to_platform_K
+from phonestereo.sim.export_common import write_dump
 
 LUT_SIZE = 42
 FIRST_FRAME_S = 5.0
@@ -151,20 +150,5 @@ def write_apple_dump(
     folder: str | os.PathLike[str], cal: Calibration, manifest: Manifest, set_root: Path
 ) -> Path:
     """Write the dump into ``folder`` (session.json, captures/, images/ linked from the set)."""
-    out = Path(folder)
     session, captures = apple_dump(cal, manifest)
-    (out / "captures").mkdir(parents=True, exist_ok=True)
-    (out / "images").mkdir(exist_ok=True)
-    (out / "session.json").write_text(json.dumps(session, indent=1) + "\n", encoding="utf-8")
-    for name, doc in captures.items():
-        (out / "captures" / name).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    for c in manifest.captures:
-        for role, rel in (("wide", c.wide), ("tele", c.tele)):
-            src = set_root / rel
-            dst = out / "images" / f"{c.id}_{IDS[role]}{Path(rel).suffix}"
-            if src.is_file() and not dst.exists():
-                try:
-                    os.link(src, dst)
-                except OSError:
-                    shutil.copy2(src, dst)
-    return out
+    return write_dump(folder, session, captures, manifest, set_root, IDS)
