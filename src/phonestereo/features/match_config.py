@@ -103,7 +103,7 @@ class MatchConfig:
     equalise_blur: bool = True
     min_blur_misfit: float = 1.0
     misfit_floor: bool = True
-    correlated_misfit: bool = True
+    correlated_misfit: bool = False
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

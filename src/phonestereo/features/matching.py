@@ -189,7 +189,9 @@ def match_rectified(
     # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
     floor = misfit_floor(ref.residual_var[ok], noise_var[ok]) if cfg.misfit_floor else 1.0
     with np.errstate(invalid="ignore"):
-        ok &= np.sqrt(ref.residual_var) <= cfg.max_normalized_residual * ref.template_std
+        # the normalised test (≈ ZNCC) counts the misfit beyond the pair's typical one
+        excess = ref.residual_var - (floor - 1.0) * noise_var
+        ok &= excess <= (cfg.max_normalized_residual * ref.template_std) ** 2
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None
