@@ -104,6 +104,7 @@ class MatchConfig:
     min_blur_misfit: float = 1.0
     misfit_floor: bool = True
     correlated_misfit: bool = False
+    typical_misfit: float = 2.0
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

@@ -187,7 +187,9 @@ def match_rectified(
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
     # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
-    floor = misfit_floor(ref.residual_var[ok], noise_var[ok]) if cfg.misfit_floor else 1.0
+    floor = 1.0  # not after blur equalisation: that models the pair's misfit already
+    if cfg.misfit_floor and added == (0.0, 0.0):
+        floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
     with np.errstate(invalid="ignore"):
         # the normalised test (≈ ZNCC) counts the misfit beyond the pair's typical one
         excess = ref.residual_var - (floor - 1.0) * noise_var

@@ -38,8 +38,12 @@ MIN_WINDOWS = 20  # fewer converged windows: white residual assumed
 _FFT = 32  # ≥ M + MAX_LAG for windows up to M = 29 (radius 14); larger windows: next power of 2
 
 
-def misfit_floor(residual_var: F64, model_var: F64) -> float:
-    """max(1, median(s² / σ_r²)): the pair's typical residual in units of its noise model.
+def misfit_floor(residual_var: F64, model_var: F64, *, typical: float = 1.0) -> float:
+    """max(1, median(s² / σ_r²) / typical): the pair's excess misfit in units of its noise model.
+
+    ``typical`` is the median ratio a pair without ISP processing already shows (the misfit of
+    rectification, surfaces and interpolation the fit does not model; Middlebury-Q Adirondack
+    measures 2.0): only the misfit beyond it raises the floor.
 
     Parameters
     ----------
@@ -62,7 +66,7 @@ def misfit_floor(residual_var: F64, model_var: F64) -> float:
     ratio = ratio[np.isfinite(ratio)]
     if not len(ratio):
         return 1.0
-    return max(1.0, float(np.median(ratio)))
+    return max(1.0, float(np.median(ratio)) / float(typical))
 
 
 def _size(m: int) -> int:

@@ -257,25 +257,6 @@ def _gram(basis_gram: F64, proj: F64, self_term: F64) -> F64:
     return g
 
 
-def _without_blur_term(res: F64, gx: F32, gy: F32, wts: F64, m: int) -> F64:
-    """The residual less its weighted projection on the window's Laplacian, shape (n, M²).
-
-    A relative blur or sharpening of the two images (defocus, the ISP's unsharp mask) leaves a
-    residual ≈ c·∇²L per window: deterministic, even, and orthogonal to the disparity's
-    influence (a zero-phase filter does not move the correlation peak). It is removed before the
-    residual variance and autocorrelation are computed, so that both describe the misfit that
-    does disturb d; one degree of freedom is spent on c.
-    """
-    n = len(res)
-    lap = np.gradient(gx.reshape(n, m, m).astype(np.float64), axis=2)
-    lap += np.gradient(gy.reshape(n, m, m).astype(np.float64), axis=1)
-    lap = lap.reshape(n, -1)
-    wn = wts / wts.sum()
-    lap -= (lap @ wn)[:, None]
-    beta = ((res * lap) @ wts) / np.maximum((lap * lap) @ wts, 1e-300)
-    return np.asarray(res - beta[:, None] * lap, np.float64)
-
-
 def refine_lk(
     left: F32,
     left_coef: F32 | None,
@@ -403,10 +384,8 @@ def refine_lk(
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())
             cov[ai] = c_cov[:, :2, :2]
-            res = _without_blur_term(
-                t64[ai] - a[i, None] * v64[i] - b[i, None], tgx[ai], tgy[ai], wts, 2 * r + 1
-            )
-            rvar[ai] = (res * res) @ wts / np.maximum(dof - 1.0, 1.0)
+            res = t64[ai] - a[i, None] * v64[i] - b[i, None]
+            rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
             resid[ai] = res
             # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]: d̂ − d = G · noise
             hc, _ = solve_spd(hess[i], c)
