@@ -105,6 +105,7 @@ class MatchConfig:
     misfit_floor: bool = True
     correlated_misfit: bool = False
     typical_misfit: float = 2.0
+    floor_after_blur: bool = False
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

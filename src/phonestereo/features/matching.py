@@ -188,7 +188,7 @@ def match_rectified(
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
     # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
     floor = 1.0  # not after blur equalisation: that models the pair's misfit already
-    if cfg.misfit_floor and added == (0.0, 0.0):
+    if cfg.misfit_floor and (added == (0.0, 0.0) or cfg.floor_after_blur):
         floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
     with np.errstate(invalid="ignore"):
         # the normalised test (≈ ZNCC) counts the misfit beyond the pair's typical one
