@@ -105,6 +105,7 @@ class MatchConfig:
     misfit_floor: bool = True
     correlated_misfit: bool = False
     typical_misfit: float = 2.0
+    typical_normalized: float = 0.02
     floor_after_blur: bool = False
 
     @classmethod
