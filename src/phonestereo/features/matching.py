@@ -14,7 +14,9 @@ Stages (each counted in :attr:`MatchResult.counts`):
    the noise and not be ill-conditioned;
 4. **σ** — the Cramér–Rao covariance from the window's gradients and the image noise, raised to
    the window's residual misfit where it fits worse than noise (:mod:`~phonestereo.features.crlb`);
-   windows fitting much worse than the typical one, or with σ_d above a bound, are dropped;
+   windows fitting much worse than the pair's typical window (its misfit floor, measured on its
+   own converged windows: compression, sharpening and denoising raise it,
+   :mod:`~phonestereo.features.misfit`), or with σ_d above a bound, are dropped;
 5. **global** — non-disparity error field, disparity histogram and neighbour support
    (:mod:`~phonestereo.features.match_filters`).
 
