@@ -5,8 +5,8 @@ Three measurements, each a function the tests call (tests/features/test_match_is
 * :func:`degraded` — a real pair with ground truth (Middlebury-Q Adirondack and Piano,
   scikit-image's motorcycle) degraded as a phone would (both images JPEG q95 / q85 / q70; the
   right one sharpened 1.8·I − 0.8·Gauss(I, σ = 1 px); the right one denoised by
-  cv2.fastNlMeansDenoising h = 5), compared with the same scene's clean pair: matches, median
-  |d − GT|, fraction within 0.5 px;
+  cv2.fastNlMeansDenoisingColored h = 5 on the colour image, then grey), compared with the
+  same scene's clean pair: matches, median |d − GT|, fraction within 0.5 px;
 * :func:`isp_pair` / :func:`isp_honesty` — textured planes rendered as ``bench_match`` does,
   then each camera's radiance through the virtual module's phone ISP (``phonestereo.sim.isp``:
   Bayer raw with noise, demosaicing, tone curve, bilateral denoise, unsharp mask, JPEG) at the
@@ -74,29 +74,42 @@ def sharpened(img: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
-def denoised(img: np.ndarray) -> np.ndarray:
-    """cv2.fastNlMeansDenoising(Colored) with h = 5 (grey images: the grey version)."""
-    if img.ndim == 3:
-        return np.asarray(cv2.fastNlMeansDenoisingColored(img, None, 5, 5))
-    return np.asarray(cv2.fastNlMeansDenoising(img, None, 5))
+def right_colour(scene: str) -> np.ndarray:
+    """The scene's right image in colour (BGR), as the file holds it."""
+    if scene == "motorcycle":
+        from skimage import data  # type: ignore[import-not-found, unused-ignore]
+
+        rgb = np.asarray(data.stereo_motorcycle()[1])
+        return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    path = bench.DATA / f"middeval3_Q_{scene}" / "im1.png"
+    return np.asarray(cv2.imread(str(path), cv2.IMREAD_COLOR))
 
 
-def degrade(left: np.ndarray, right: np.ndarray, case: str) -> tuple[np.ndarray, np.ndarray]:
-    """The pair of ``case`` (one of :data:`CASES`)."""
+def denoised(bgr: np.ndarray) -> np.ndarray:
+    """The issue's denoiser: cv2.fastNlMeansDenoisingColored, h = hColor = 5, then grey."""
+    out = cv2.fastNlMeansDenoisingColored(bgr, None, 5, 5)
+    return np.asarray(cv2.cvtColor(out, cv2.COLOR_BGR2GRAY))
+
+
+def degrade(
+    left: np.ndarray, right: np.ndarray, case: str, scene: str = ""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The grey pair of ``case`` (one of :data:`CASES`); "denoised" needs the ``scene`` name
+    (the colour right image is denoised, as the issue did)."""
     if case.startswith("jpeg"):
         q = int(case[4:])
         return jpeg(left, q), jpeg(right, q)
     if case == "sharpened":
         return left, sharpened(right)
     if case == "denoised":
-        return left, denoised(right)
+        return left, denoised(right_colour(scene))
     return left, right
 
 
 def degraded(scene: str, case: str, cfg: MatchConfig | None = None) -> dict[str, Any]:
     """Matches, median |d − GT| and fraction within 0.5 px of ``scene`` under ``case``."""
     left, right, gt, ndisp = load_scene(scene)
-    a, b = degrade(left, right, case)
+    a, b = degrade(left, right, case, scene)
     res = match_rectified(a, b, max_disparity=ndisp, config=cfg)
     g = bench.gt_at(gt, res.xy)
     ok = np.isfinite(g)
