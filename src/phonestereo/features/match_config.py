@@ -102,6 +102,9 @@ class MatchConfig:
     residual_sigma: bool = True
     equalise_blur: bool = True
     min_blur_misfit: float = 1.0
+    misfit_floor: bool = True
+    correlated_misfit: bool = False
+    typical_misfit: float = 2.0
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

@@ -39,6 +39,7 @@ from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
+from phonestereo.features.misfit import correlation_factor, misfit_floor, residual_correlation
 from phonestereo.features.search import SearchResult, ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 
@@ -184,14 +185,32 @@ def match_rectified(
     if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
         k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
-    sd, se, _ = match_sigma(
-        ref.cov_unit, ref.residual_var, ref.gain, *shift_noise, use_residual=cfg.residual_sigma
-    )
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
+    # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
+    floor = 1.0  # not after blur equalisation: that models the pair's misfit already
+    if cfg.misfit_floor and added == (0.0, 0.0):
+        floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
     with np.errstate(invalid="ignore"):
-        ok &= np.sqrt(ref.residual_var) <= cfg.max_normalized_residual * ref.template_std
-        ok &= ref.residual_var <= cfg.max_residual_ratio**2 * noise_var
+        # the normalised test (≈ ZNCC) counts the misfit beyond the pair's typical one
+        excess = ref.residual_var - (floor - 1.0) * noise_var
+        ok &= excess <= (cfg.max_normalized_residual * ref.template_std) ** 2
+        ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
+    fd = fe = None
+    if cfg.correlated_misfit and ref.residual is not None and ref.influence is not None:
+        rho = residual_correlation(ref.residual[ok], 2 * r + 1)
+        fd = correlation_factor(ref.influence[:, 0], rho)
+        fe = correlation_factor(ref.influence[:, 1], rho)
+    sd, se, _ = match_sigma(
+        ref.cov_unit,
+        ref.residual_var,
+        ref.gain,
+        *shift_noise,
+        use_residual=cfg.residual_sigma,
+        factor_d=fd,
+        factor_e=fe,
+    )
+    with np.errstate(invalid="ignore"):
         ok &= sd <= cfg.max_sigma_d
     counts["sigma"] = int(ok.sum())
     sel = np.flatnonzero(ok)

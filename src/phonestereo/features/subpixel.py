@@ -155,6 +155,13 @@ class Refinement:
         Weighted zero-mean NCC of the left window with the warped right window at the solution.
     template_std : ndarray, shape (N,)
         Weighted standard deviation of the left window, DN.
+    influence : ndarray, shape (N, 2, M²), float32
+        Influence images G of d and e: d̂ − d = Σ_p G_d(p)·n(p) for a small residual n in the
+        window (row-major M × M, M = 2r + 1), so Var d = Σ_pq G_d(p) C(p − q) G_d(q) for noise
+        of autocorrelation C, and Σ_p G_d(p)² = ``cov_unit[:, 0, 0]`` (white noise); NaN where
+        not converged (:mod:`~phonestereo.features.misfit`).
+    residual : ndarray, shape (N, M²), float32
+        The residual L − a·R(warp) − b at the solution, DN; NaN where not converged.
     """
 
     d: F64
@@ -168,6 +175,8 @@ class Refinement:
     residual_var: F64
     zncc: F64
     template_std: F64
+    influence: F32 | None = None
+    residual: F32 | None = None
 
 
 def gaussian_window(radius: int, sigma_w: float) -> F64:
@@ -324,6 +333,8 @@ def refine_lk(
     start = theta[:, :2].copy()
     ok_out, iters = np.zeros(n, bool), np.zeros(n, np.int64)
     cov, rvar, zncc = np.full((n, 2, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    infl = np.full((n, 2, len(wts)), np.nan, np.float32)
+    resid = np.full((n, len(wts)), np.nan, np.float32)
     active = np.arange(n)
     for it in range(max_iter):
         if not len(active):
@@ -375,6 +386,11 @@ def refine_lk(
             cov[ai] = c_cov[:, :2, :2]
             res = t64[ai] - a[i, None] * v64[i] - b[i, None]
             rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
+            resid[ai] = res
+            # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]: d̂ − d = G · noise
+            hc, _ = solve_spd(hess[i], c)
+            full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
+            infl[ai] = hc[:, :2] @ full
             tc = t[i] - (t[i] @ wn32)[:, None]
             vc = val32[i] - (val32[i] @ wn32)[:, None]
             den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
@@ -394,4 +410,6 @@ def refine_lk(
         residual_var=rvar,
         zncc=zncc,
         template_std=np.sqrt((tc**2) @ wn),
+        influence=infl,
+        residual=resid,
     )
