@@ -193,7 +193,8 @@ def main() -> int:
             out = degraded(scene, case)
             clean = clean or out
             print(
-                f"{scene:11s} {case:10s} {out['matches']:7d} {out['matches'] / clean['matches']:5.0%}"
+                f"{scene:11s} {case:10s} {out['matches']:7d}"
+                f" {out['matches'] / clean['matches']:5.0%}"
                 f" {out['median_abs_err_px']:11.4f} {out['within_0.5px']:7.3f}"
                 f" {out['within_1_sigma']:8.2f}",
                 flush=True,

@@ -104,7 +104,9 @@ class MatchConfig:
     min_blur_misfit: float = 1.0
     misfit_floor: bool = True
     correlated_misfit: bool = False
-    typical_misfit: float = 2.0
+    typical_misfit: float = 6.0
+    typical_normalized: float = 0.02
+    floor_after_blur: bool = False
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

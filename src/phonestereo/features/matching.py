@@ -178,6 +178,7 @@ def match_rectified(
         max_slant=cfg.max_slant,
         max_iter=cfg.max_iter,
         tol=cfg.tol,
+        influence=cfg.correlated_misfit,
     )
     ok = ref.converged & (np.abs(ref.d - s.d0[idx]) <= cfg.max_shift)
     ok &= np.abs(ref.e - s.e0[idx]) <= cfg.max_shift
@@ -187,13 +188,14 @@ def match_rectified(
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
     # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
-    floor = 1.0  # not after blur equalisation: that models the pair's misfit already
-    if cfg.misfit_floor and added == (0.0, 0.0):
+    floor = nfloor = 1.0  # not after blur equalisation: that models the pair's misfit already
+    if cfg.misfit_floor and (added == (0.0, 0.0) or cfg.floor_after_blur):
         floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
+        nfloor = misfit_floor(
+            ref.residual_var[ok], ref.template_std[ok] ** 2, typical=cfg.typical_normalized
+        )
     with np.errstate(invalid="ignore"):
-        # the normalised test (≈ ZNCC) counts the misfit beyond the pair's typical one
-        excess = ref.residual_var - (floor - 1.0) * noise_var
-        ok &= excess <= (cfg.max_normalized_residual * ref.template_std) ** 2
+        ok &= ref.residual_var <= nfloor * (cfg.max_normalized_residual * ref.template_std) ** 2
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None

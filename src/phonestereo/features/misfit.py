@@ -155,7 +155,7 @@ def correlation_factor(influence: F32, rho: F64, *, floor: float = 0.25) -> F64:
     fin = np.isfinite(g).all(axis=1)
     if not fin.any():
         return out
-    m = int(round(np.sqrt(g.shape[1])))
+    m = round(float(np.sqrt(g.shape[1])))
     n = _size(m)
     spec = np.fft.rfft2(g[fin].reshape(-1, m, m), s=(n, n))
     acf = np.fft.irfft2((spec * spec.conj()).real, s=(n, n))

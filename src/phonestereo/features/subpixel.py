@@ -159,9 +159,10 @@ class Refinement:
         Influence images G of d and e: d̂ − d = Σ_p G_d(p)·n(p) for a small residual n in the
         window (row-major M × M, M = 2r + 1), so Var d = Σ_pq G_d(p) C(p − q) G_d(q) for noise
         of autocorrelation C, and Σ_p G_d(p)² = ``cov_unit[:, 0, 0]`` (white noise); NaN where
-        not converged (:mod:`~phonestereo.features.misfit`).
+        not converged; None unless ``refine_lk(influence=True)`` (:mod:`.misfit`).
     residual : ndarray, shape (N, M²), float32
-        The residual L − a·R(warp) − b at the solution, DN; NaN where not converged.
+        The residual L − a·R(warp) − b at the solution, DN; NaN where not converged; None
+        unless ``refine_lk(influence=True)``.
     """
 
     d: F64
@@ -272,6 +273,7 @@ def refine_lk(
     max_iter: int = 10,
     tol: float = 1e-3,
     max_step: float = 1.5,
+    influence: bool = False,
 ) -> Refinement:
     """Refine integer-pixel matches to sub-pixel (d, e) by Gauss–Newton.
 
@@ -297,6 +299,9 @@ def refine_lk(
         Iteration limit and convergence threshold on the (d, e) update, px.
     max_step : float
         A window that wanders farther than this from (d0, e0) is not converged, px.
+    influence : bool
+        Also return the influence images of d, e and the residual images
+        (:attr:`Refinement.influence`, :attr:`Refinement.residual`; None otherwise).
 
     Returns
     -------
@@ -333,8 +338,8 @@ def refine_lk(
     start = theta[:, :2].copy()
     ok_out, iters = np.zeros(n, bool), np.zeros(n, np.int64)
     cov, rvar, zncc = np.full((n, 2, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    infl = np.full((n, 2, len(wts)), np.nan, np.float32)
-    resid = np.full((n, len(wts)), np.nan, np.float32)
+    infl = np.full((n if influence else 0, 2, len(wts)), np.nan, np.float32)
+    resid = np.full((n if influence else 0, len(wts)), np.nan, np.float32)
     active = np.arange(n)
     for it in range(max_iter):
         if not len(active):
@@ -386,11 +391,11 @@ def refine_lk(
             cov[ai] = c_cov[:, :2, :2]
             res = t64[ai] - a[i, None] * v64[i] - b[i, None]
             rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
-            resid[ai] = res
-            # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]: d̂ − d = G · noise
-            hc, _ = solve_spd(hess[i], c)
-            full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
-            infl[ai] = hc[:, :2] @ full
+            if influence:  # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]
+                resid[ai] = res
+                hc, _ = solve_spd(hess[i], c)
+                full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
+                infl[ai] = hc[:, :2] @ full
             tc = t[i] - (t[i] @ wn32)[:, None]
             vc = val32[i] - (val32[i] @ wn32)[:, None]
             den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
@@ -410,6 +415,6 @@ def refine_lk(
         residual_var=rvar,
         zncc=zncc,
         template_std=np.sqrt((tc**2) @ wn),
-        influence=infl,
-        residual=resid,
+        influence=infl if influence else None,
+        residual=resid if influence else None,
     )
