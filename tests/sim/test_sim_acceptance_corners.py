@@ -1,7 +1,7 @@
 """Issue #2 acceptance: ground-truth corners agree with an independent fit on the images.
 
-Noise-free renders (sensor noise, defocus and the ISP off) of the verification scenario at 0.8, 2 and
-4 m; the true corner pixels of ground_truth.json are compared with a saddle-point fit made on
+Noise-free renders (sensor noise, defocus and the ISP off) of the verification scenario at 0.8,
+2 and 4 m; the true corner pixels of ground_truth.json are compared with a saddle-point fit made on
 the rendered PNGs (features/saddle.py, which never sees the truth beyond its start point).
 """
 

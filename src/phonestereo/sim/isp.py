@@ -2,7 +2,8 @@
 
 The stages and their parameters are in :mod:`phonestereo.sim.isp_spec`; the sensor's noise
 (full well, read noise, exposure) comes from the camera's ``sensor`` block. Everything is
-vectorised NumPy and OpenCV on float32 images (demosaicing on the uint16 mosaic).
+vectorised NumPy and OpenCV on float32 images (demosaicing on the uint16 mosaic; chroma at
+half resolution).
 
 :func:`apply_isp` gives the decoded 8-bit BGR image a phone's JPEG decodes to;
 :func:`isp_file` the file bytes a capture set stores (``.jpg``, or ``.png`` when the ISP's
@@ -22,7 +23,6 @@ Examples
 
 from __future__ import annotations
 
-import functools
 from typing import Any
 
 import cv2
@@ -47,8 +47,7 @@ _DEMOSAIC_CODES: dict[tuple[str, str], int] = {
 }
 _LUMA_BGR = np.array([0.114, 0.587, 0.299])  # BT.601 luma weights (JPEG's Y), B, G, R
 _CHANNEL = {"R": 0, "G": 1, "B": 2}
-_CODES = 1 << 16  # uint16 codes of [0, 1] (mosaic and tone-curve input)
-_ZERO8 = np.float32(128 / 255)
+_CODES = 1 << 16  # uint16 codes of [0, 1] (the demosaiced mosaic)
 _GREY_18 = 0.18  # reference grey of the noise profile (18 % reflectance)
 
 
@@ -87,12 +86,6 @@ def tone_curve(x: Any, gamma: float = 2.4) -> NDArray[np.float64]:
 def _tone_slope(x: float, gamma: float) -> float:
     x0, phi = _knee(gamma)
     return phi if x <= x0 else 1.055 / gamma * x ** (1 / gamma - 1)
-
-
-@functools.lru_cache(maxsize=16)
-def _tone_lut(gamma: float) -> F32:
-    """The tone curve sampled at the 2^16 uint16 codes of [0, 1]."""
-    return tone_curve(np.arange(_CODES) / (_CODES - 1), gamma).astype(np.float32)
 
 
 def _ccm(k: float) -> NDArray[np.float32]:
@@ -162,9 +155,14 @@ def _demosaic(mosaic: NDArray[np.uint16], isp: IspSpec) -> F32:
     return bgr16.astype(np.float32) * np.float32(1 / (_CODES - 1))
 
 
-def _convert(x: Any, scale: float, depth: int) -> Any:
-    """``x · scale`` rounded and saturated to an integer depth (cv2.CV_8U / CV_16U)."""
-    return cv2.addWeighted(x, scale, x, 0.0, 0.0, dtype=depth)
+def _tone(lin: F32, gamma: float) -> F32:
+    """:func:`tone_curve` on float32 images: the power branch is concave and the linear branch
+    is its tangent through the origin, so the curve is their minimum."""
+    _, phi = _knee(gamma)
+    x = np.clip(lin, 0.0, 1.0)
+    p = cv2.pow(x, 1.0 / gamma)
+    out: F32 = cv2.min(cv2.addWeighted(p, 1.055, p, 0.0, -0.055), x * np.float32(phi))
+    return out
 
 
 def process(
@@ -176,31 +174,34 @@ def process(
 ) -> U8:
     """Every ISP stage but the JPEG encoder: radiance (H, W) → 8-bit BGR (H, W, 3).
 
-    Parameters are those of :func:`apply_isp`.
+    Parameters are those of :func:`apply_isp`. Luma is processed at full resolution, chroma
+    at half resolution (as phone ISPs and JPEG's 4:2:0 do; chroma is linear in the toned RGB,
+    so area-downsampling the RGB first gives the same chroma).
     """
     rad = np.asarray(radiance, dtype=np.float32)
     if rad.ndim != 2:
         raise ShapeError(f"radiance must be a 2-D (H, W) image, got shape {rad.shape}")
+    h, w = rad.shape
     lin = _demosaic(_raw(rad, isp, sensor, rng, noise), isp)
     if isp.ccm_strength > 0:
         lin = cv2.transform(lin, _ccm(isp.ccm_strength))
-    tone = _tone_lut(isp.tone_gamma)[_convert(lin, _CODES - 1, cv2.CV_16U)]
-    ycc = cv2.cvtColor(tone, cv2.COLOR_BGR2YCrCb)  # float: Y in [0, 1], Cr/Cb around 0.5
-    y, cr, cb = cv2.split(ycc)
+    tone = _tone(lin, isp.tone_gamma)
+    y = cv2.transform(tone, _LUMA_BGR[None].astype(np.float32))  # BT.601 luma, (H, W)
     if isp.denoise_strength > 0:
         sigma = float(isp.denoise_strength * luma_noise_sigma(isp, sensor))
         y = cv2.bilateralFilter(y, 0, sigma, isp.denoise_radius_px)
-    if isp.sharpen_amount > 0:
-        blur = cv2.GaussianBlur(y, (0, 0), isp.sharpen_radius_px)
-        y = cv2.addWeighted(y, 1 + isp.sharpen_amount, blur, -isp.sharpen_amount, 0.0)
-    chroma = []
+    a = isp.sharpen_amount
+    blur = cv2.GaussianBlur(y, (0, 0), isp.sharpen_radius_px) if a > 0 else y
+    y8 = cv2.addWeighted(y, 255 * (1 + a), blur, -255 * a, 0.0, dtype=cv2.CV_8U)
+    half = cv2.resize(tone, ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA)
+    _, cr, cb = cv2.split(cv2.cvtColor(half, cv2.COLOR_BGR2YCrCb))  # float: zero at 0.5
+    sat, chroma = isp.chroma_saturation, []
     for c in (cr, cb):
         if isp.chroma_blur_px > 0:
-            c = cv2.GaussianBlur(c, (0, 0), isp.chroma_blur_px)
-        # float YCrCb has its chroma zero at 0.5, 8-bit at 128 (not 127.5)
-        chroma.append((c - np.float32(0.5)) * np.float32(isp.chroma_saturation) + _ZERO8)
-    ycc8 = _convert(cv2.merge([y, *chroma]), 255.0, cv2.CV_8U)
-    out: U8 = cv2.cvtColor(ycc8, cv2.COLOR_YCrCb2BGR)
+            c = cv2.GaussianBlur(c, (0, 0), isp.chroma_blur_px / 2)  # σ in half-res pixels
+        c8 = cv2.addWeighted(c, 255 * sat, c, 0.0, 128 - 127.5 * sat, dtype=cv2.CV_8U)  # 128 = 0
+        chroma.append(cv2.resize(c8, (w, h), interpolation=cv2.INTER_LINEAR))
+    out: U8 = cv2.cvtColor(cv2.merge([y8, *chroma]), cv2.COLOR_YCrCb2BGR)
     return out
 
 
