@@ -4,6 +4,11 @@ Wide 2000 × 1500 (f = 1500 px, 4.2 mm f/1.8) and tele 2000 × 1500 (f = 4500 px
 of the folded-x3 module, a realistic lens (opencv5 k1 = −0.05, k2 = 0.02, small p1/p2), the chart
 tilted ~7° / 9°, defocus on (both focused at 1.5 m). Target: ≤ 1 s per pair.
 
+Then the sensor stage on the same radiance images, both ways in the same run: the linear grey
+sensor (``sim.sensor.capture``) and the folded-x3 preset's phone ISP per camera
+(``sim.isp.isp_file``: CFA, noise, demosaic, ..., JPEG bytes). The ISP's extra time per pair is
+their difference (issue #16 target: ≤ 0.5 s per pair).
+
 Usage::
 
     .venv/bin/python benchmarks/bench_render.py [--repeat 5] [--profile] [--json]
@@ -32,8 +37,11 @@ import numpy as np  # noqa: E402
 import phonestereo.sim.render as render  # noqa: E402
 import phonestereo.sim.scene as scene_mod  # noqa: E402
 from phonestereo.geometry import Camera, Transform, make_lens  # noqa: E402
+from phonestereo.sim.isp import isp_file  # noqa: E402
+from phonestereo.sim.module import load_module  # noqa: E402
 from phonestereo.sim.optics import defocus_sigma_function  # noqa: E402
 from phonestereo.sim.scene import PlanarObject, Scene, facing_pose  # noqa: E402
+from phonestereo.sim.sensor import SensorModel, capture  # noqa: E402
 
 LENS = make_lens("opencv5", (-0.05, 0.02, 3e-4, -2e-4, 0.0))
 CAMERAS = {  # name: (focal length px, physical focal length m, f-number)
@@ -68,6 +76,34 @@ def _count_samples() -> tuple[list[int], Any]:
         render.cast_rays = scene_mod.cast_rays = original  # type: ignore[assignment]
 
     return counts, restore
+
+
+def _isp_timing(cams: dict[str, Camera], scene: Scene, repeat: int) -> dict[str, float]:
+    """Seconds per pair of the linear sensor and of the preset's ISP, best of ``repeat``:
+    wall clock and this process's CPU time (the honest figure on a shared, loaded machine)."""
+    spec = load_module("folded-x3")
+    rad = {n: render.render_view(c, Transform.identity(), scene).radiance for n, c in cams.items()}
+    out = dict.fromkeys(("linear_s", "isp_s", "linear_cpu_s", "isp_cpu_s"), 0.0)
+    for name in cams:
+        model = SensorModel(**spec.camera(name).sensor.model_dump())
+        isp = spec.isp(name)
+        assert isp is not None
+        rng = np.random.default_rng(0)
+        times: dict[str, list[float]] = {k: [] for k in out}
+        for _ in range(repeat + 1):  # the first run warms up (OpenCV, caches)
+            for key in ("linear", "isp"):
+                w0, c0 = time.perf_counter(), time.process_time()
+                if key == "linear":
+                    capture(rad[name], rng, model)
+                else:
+                    isp_file(rad[name], isp, model, rng)
+                times[f"{key}_s"].append(time.perf_counter() - w0)
+                times[f"{key}_cpu_s"].append(time.process_time() - c0)
+        for k in out:
+            out[k] += min(times[k][1:])
+    out["extra_s"] = out["isp_s"] - out["linear_s"]
+    out["extra_cpu_s"] = out["isp_cpu_s"] - out["linear_cpu_s"]
+    return out
 
 
 def main() -> None:
@@ -112,6 +148,12 @@ def main() -> None:
             f"{samples[name] / 1e6:.2f} M samples ({samples[name] / 3e6:.2f} per pixel)"
         )
     print(f"  pair  {pair:.3f} s (median {pair_median:.3f} s); target <= 1 s")
+    isp = _isp_timing({name: cam for name, cam, _ in jobs}, scene, max(args.repeat, 1))
+    print("sensor stage per pair (same radiance, one core): best of the repeats")
+    for kind, sfx in (("wall", "s"), ("CPU", "cpu_s")):
+        lin, full, extra = isp[f"linear_{sfx}"], isp[f"isp_{sfx}"], isp[f"extra_{sfx}"]
+        print(f"  {kind:4s} linear grey sensor {lin:.3f} s, phone ISP {full:.3f} s "
+              f"(x{full / lin:.1f}); ISP extra {extra:.3f} s/pair; target <= 0.5 s")  # fmt: skip
     if args.profile:
         prof = cProfile.Profile()
         prof.enable()
@@ -130,6 +172,11 @@ def main() -> None:
                     "samples_per_camera": samples,
                     "threads": 1,
                     "target_seconds_per_pair": 1.0,
+                    "isp_seconds_per_pair": round(isp["isp_s"], 4),
+                    "linear_sensor_seconds_per_pair": round(isp["linear_s"], 4),
+                    "isp_extra_seconds_per_pair": round(isp["extra_s"], 4),
+                    "isp_extra_cpu_seconds_per_pair": round(isp["extra_cpu_s"], 4),
+                    "isp_target_extra_seconds_per_pair": 0.5,
                 }
             )
         )

@@ -49,14 +49,14 @@ def test_same_seed_gives_a_byte_identical_folder(tmp_path: Path) -> None:
     assert sorted(a) == [
         "calibration.json",
         "ground_truth.json",
-        "images/r00_0_tele.png",
-        "images/r00_0_wide.png",
-        "images/r00_1_tele.png",
-        "images/r00_1_wide.png",
+        "images/r00_0_tele.jpg",  # the presets' ISP stores JPEG, as a phone does
+        "images/r00_0_wide.jpg",
+        "images/r00_1_tele.jpg",
+        "images/r00_1_wide.jpg",
         "manifest.json",
     ]
     assert a == b  # every byte, images included
-    assert a["images/r00_0_wide.png"] != c["images/r00_0_wide.png"]  # the seed matters
+    assert a["images/r00_0_wide.jpg"] != c["images/r00_0_wide.jpg"]  # the seed matters
 
 
 def test_capture_set_is_readable_by_io(tmp_path: Path) -> None:
@@ -74,12 +74,12 @@ def test_capture_set_is_readable_by_io(tmp_path: Path) -> None:
 def test_rendered_corners_sit_on_their_ground_truth(tmp_path: Path) -> None:
     """Full-size folded-x3, noise and defocus on: cornerSubPix finds the chessboard corners
     where ground truth says (the renderer's own test pins the noise-free accuracy at 0.02 px;
-    here sensor noise and defocus blur widen it to ~0.1 px RMS, without bias)."""
+    here sensor noise, defocus blur and the phone ISP widen it to ~0.1 px RMS, without bias)."""
     plan = plan_scenario("refocus", load_module("folded-x3"), 0, config=StackConfig(attempts=1))
     write_capture_set(tmp_path, plan)
     truth = load_ground_truth(tmp_path).captures[0].objects[0].keypoints["corners"].arrays()
     for role, px, win in (("wide", truth.wide_px, 5), ("tele", truth.tele_px, 11)):
-        img = read_gray(tmp_path / "images" / f"r00_0_{role}.png").astype(np.float32)
+        img = read_gray(tmp_path / "images" / f"r00_0_{role}.jpg").astype(np.float32)
         p = px[np.isfinite(px).all(axis=1)]
         p = p[(p.min(axis=1) > 30) & (p[:, 0] < 1970) & (p[:, 1] < 1470)]
         start = (p + 0.3).astype(np.float32).reshape(-1, 1, 2)

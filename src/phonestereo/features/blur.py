@@ -279,7 +279,11 @@ def relative_blur(
     h = np.sqrt(np.exp(_log_power_table(size)[:, use]))  # (C, bins), C[0] = identity
     # blurring the right: the fit sees left vs right·H; blurring the left: left·H vs right
     cost_r = _misfit(np.broadcast_to(al, h.shape), ar * h)
-    cost_l = _misfit(al * h, np.broadcast_to(ar, h.shape))
+    # blurring the left shrinks the target (and the misfit with it): compare relative misfits,
+    # expressed in the unblurred left's power (else the strongest blur would always win)
+    lh = al * h
+    cost_l = _misfit(lh, np.broadcast_to(ar, h.shape))
+    cost_l = cost_l * float((al * al).sum()) / np.maximum((lh * lh).sum(axis=1), 1e-300)
     gain2 = float((al * ar).sum() / max(float((ar * ar).sum()), 1e-300)) ** 2
     costs = np.concatenate([cost_l[:0:-1], cost_r])  # σ = −2.5 … 0 … 2.5
     sig = np.concatenate([-_CANDIDATES[:0:-1], _CANDIDATES])

@@ -162,21 +162,36 @@ def match_sigma(
     sigma_right: float,
     *,
     use_residual: bool = True,
+    factor_d: F64 | None = None,
+    factor_e: F64 | None = None,
 ) -> tuple[F64, F64, F64]:
     """σ_d, σ_e (px) and the σ_r² used (DN²) for each match.
 
     σ_r² = σ_L² + a²·σ_R² from the image noise (the Cramér–Rao floor), raised to the
     a-posteriori residual variance where the window fits worse than noise (``use_residual``).
+    ``factor_d``, ``factor_e`` (shape (N,), default 1) multiply the residual term: the variance
+    of d̂ (e) under the residual's measured autocorrelation over that under a white residual
+    (:func:`~phonestereo.features.misfit.correlation_factor`); the noise floor stays white
+    (its correlation after blur equalisation is already in σ_L, σ_R).
 
     >>> cov = np.array([[[1e-4, 0.0], [0.0, 2e-4]]])          # px²/DN²
     >>> sd, se, var = match_sigma(cov, np.array([1.0]), np.array([1.0]), 1.0, 1.0)
     >>> round(float(sd[0]), 4), round(float(se[0]), 4)        # σ_r² = 2 DN²
     (0.0141, 0.02)
+    >>> sd, _, _ = match_sigma(cov, np.array([8.0]), np.array([1.0]), 1.0, 1.0,
+    ...                        factor_d=np.array([2.0]))
+    >>> round(float(sd[0]), 4)                                # 8 DN² residual, twice as smooth
+    0.04
     """
     noise = (
         float(sigma_left) ** 2 + np.asarray(gain, dtype=np.float64) ** 2 * float(sigma_right) ** 2
     )
-    var = np.maximum(noise, residual_var) if use_residual else noise * np.ones_like(residual_var)
-    sd = np.sqrt(var * cov_unit[:, 0, 0])
-    se = np.sqrt(var * cov_unit[:, 1, 1])
-    return sd, se, var
+    res = np.asarray(residual_var, dtype=np.float64)
+    if not use_residual:
+        var = noise * np.ones_like(res)
+        return np.sqrt(var * cov_unit[:, 0, 0]), np.sqrt(var * cov_unit[:, 1, 1]), var
+    fd = np.ones_like(res) if factor_d is None else np.asarray(factor_d, np.float64)
+    fe = np.ones_like(res) if factor_e is None else np.asarray(factor_e, np.float64)
+    sd = np.sqrt(np.maximum(noise, res * fd) * cov_unit[:, 0, 0])
+    se = np.sqrt(np.maximum(noise, res * fe) * cov_unit[:, 1, 1])
+    return sd, se, np.maximum(noise, res)

@@ -42,9 +42,11 @@ class MatchConfig:
     max_shift : float
         |sub-pixel − parabola start| allowed in d and e, px.
     max_normalized_residual : float
-        Residual σ / window σ (≈ √(1 − ZNCC²)) allowed after the fit.
+        Residual σ / window σ (≈ √(1 − ZNCC²)) allowed after the fit, times √ of the pair's
+        normalised misfit floor (``typical_normalized``).
     max_residual_ratio : float
-        Residual σ / noise σ_r allowed (the window must fit to a few times the noise).
+        Residual σ / noise σ_r allowed (the window must fit to a few times the noise), times √
+        of the pair's misfit floor (``typical_misfit``).
     max_sigma_d : float
         Largest σ_d kept, px.
     e_floor_px, e_k_mad : float
@@ -67,6 +69,35 @@ class MatchConfig:
         The pair is equalised only when its blur difference adds at least this many noise
         variances to a window's residual (``BlurEstimate.misfit_ratio``); unblurred pairs
         measure ≤ 0.35, one image blurred by σ = 0.5 px 3.7–8.8 (Middlebury, motorcycle).
+    misfit_floor : bool
+        Measure the pair's own misfit (:mod:`~phonestereo.features.misfit`) and test the
+        residuals against it: a window is dropped when it fits much worse than the pair's
+        typical window, not worse than sensor noise alone would allow. JPEG, sharpening and
+        denoising lower the image's noise estimate and add misfit: without the floor the
+        residual tests removed 55–100 % of the windows (Adirondack JPEG q85: 14 matches of 883
+        clean; with it 702).
+    typical_misfit : float
+        The median window residual (in noise variances σ_L² + a²σ_R²) that a pair without
+        ISP processing already shows and that does not raise the floor: clean real pairs
+        measure 2.0 (Adirondack, Piano) and 5.7 (motorcycle, GT-consistent left); JPEG q95 /
+        q85 / q70 12 / 52 / 132 (Adirondack). The floor is max(1, median / 6).
+    typical_normalized : float
+        The same for the normalised residual s² / window variance: clean 0.014 (Adirondack),
+        0.029 (motorcycle); JPEG q85 0.073, q70 0.10. The normalised test's bound is raised by
+        max(1, median / 0.02): at 0.03 the motorcycle's figures stay as before, but JPEG q85
+        keeps only 56–67 % of the matches.
+    floor_after_blur : bool
+        Also apply the floors after blur equalisation (False: the equalisation models the
+        pair's misfit). Real phone pairs need it (the sharper tele is blurred, and the computed
+        noise of the blurred image is far below the ISP's misfit: phone_wide_ultra keeps 0–22
+        matches per pair without it, 102–253 with it); on the motorcycle pair with one image
+        blurred by 0.7–1 px it raises the median error 1.2–1.4× (tests/features/test_match_blur).
+    correlated_misfit : bool
+        Scale the residual part of σ_d², σ_e² by the residual's pooled autocorrelation (the
+        sandwich with C(δ) instead of a white σ²; :func:`~.misfit.correlation_factor`). Off: on
+        JPEG and ISP renders the factor is 0.9–1.4 and changes no figure (within σ 0.65–0.69
+        either way), while on pairs with a relative blur it reads the deterministic, even
+        misfit as correlated noise and over-states σ (within σ 0.83–0.87 instead of 0.60–0.64).
     """
 
     detector: str = "dog"
@@ -102,6 +133,11 @@ class MatchConfig:
     residual_sigma: bool = True
     equalise_blur: bool = True
     min_blur_misfit: float = 1.0
+    misfit_floor: bool = True
+    correlated_misfit: bool = False
+    typical_misfit: float = 6.0
+    typical_normalized: float = 0.02
+    floor_after_blur: bool = False
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

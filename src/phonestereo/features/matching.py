@@ -14,7 +14,9 @@ Stages (each counted in :attr:`MatchResult.counts`):
    the noise and not be ill-conditioned;
 4. **σ** — the Cramér–Rao covariance from the window's gradients and the image noise, raised to
    the window's residual misfit where it fits worse than noise (:mod:`~phonestereo.features.crlb`);
-   windows fitting much worse than the typical one, or with σ_d above a bound, are dropped;
+   windows fitting much worse than the pair's typical window (its misfit floor, measured on its
+   own converged windows: compression, sharpening and denoising raise it,
+   :mod:`~phonestereo.features.misfit`), or with σ_d above a bound, are dropped;
 5. **global** — non-disparity error field, disparity histogram and neighbour support
    (:mod:`~phonestereo.features.match_filters`).
 
@@ -39,6 +41,7 @@ from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
+from phonestereo.features.misfit import correlation_factor, misfit_floor, residual_correlation
 from phonestereo.features.search import SearchResult, ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 
@@ -177,6 +180,7 @@ def match_rectified(
         max_slant=cfg.max_slant,
         max_iter=cfg.max_iter,
         tol=cfg.tol,
+        influence=cfg.correlated_misfit,
     )
     ok = ref.converged & (np.abs(ref.d - s.d0[idx]) <= cfg.max_shift)
     ok &= np.abs(ref.e - s.e0[idx]) <= cfg.max_shift
@@ -184,14 +188,33 @@ def match_rectified(
     if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
         k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
-    sd, se, _ = match_sigma(
-        ref.cov_unit, ref.residual_var, ref.gain, *shift_noise, use_residual=cfg.residual_sigma
-    )
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
+    # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
+    floor = nfloor = 1.0  # not after blur equalisation: that models the pair's misfit already
+    if cfg.misfit_floor and (added == (0.0, 0.0) or cfg.floor_after_blur):
+        floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
+        nfloor = misfit_floor(
+            ref.residual_var[ok], ref.template_std[ok] ** 2, typical=cfg.typical_normalized
+        )
     with np.errstate(invalid="ignore"):
-        ok &= np.sqrt(ref.residual_var) <= cfg.max_normalized_residual * ref.template_std
-        ok &= ref.residual_var <= cfg.max_residual_ratio**2 * noise_var
+        ok &= ref.residual_var <= nfloor * (cfg.max_normalized_residual * ref.template_std) ** 2
+        ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
+    fd = fe = None
+    if cfg.correlated_misfit and ref.residual is not None and ref.influence is not None:
+        rho = residual_correlation(ref.residual[ok], 2 * r + 1)
+        fd = correlation_factor(ref.influence[:, 0], rho)
+        fe = correlation_factor(ref.influence[:, 1], rho)
+    sd, se, _ = match_sigma(
+        ref.cov_unit,
+        ref.residual_var,
+        ref.gain,
+        *shift_noise,
+        use_residual=cfg.residual_sigma,
+        factor_d=fd,
+        factor_e=fe,
+    )
+    with np.errstate(invalid="ignore"):
         ok &= sd <= cfg.max_sigma_d
     counts["sigma"] = int(ok.sum())
     sel = np.flatnonzero(ok)

@@ -27,18 +27,19 @@ band-limited texture shifted by an exact Fourier shift the bias is < 0.004 px at
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
 from phonestereo.features.crlb import sandwich, solve_spd
+from phonestereo.features.refinement import Refinement
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
+
+__all__ = ["Refinement", "bspline_coefficients", "gaussian_window", "refine_lk", "sample_windows"]
 
 _Z = np.sqrt(3.0) - 2.0  # pole of the cubic B-spline prefilter
 _TAPS = 10  # |z|^11 ≈ 5e-7: the FIR truncation is invisible in 8-bit data
@@ -128,46 +129,6 @@ def sample_windows(
     for k in range(1, 4):
         val += wx[:, k] * rowsum[flat + k]
     return val.reshape(n, m, m), ok
-
-
-@dataclass(frozen=True, eq=False)
-class Refinement:
-    """Result of :func:`refine_lk` for N windows.
-
-    Attributes
-    ----------
-    d, e : ndarray, shape (N,)
-        Disparity and non-disparity error at the window centre, px.
-    gain, offset : ndarray, shape (N,)
-        Photometric map left ≈ gain · right + offset.
-    slant : ndarray, shape (N, 2)
-        Disparity gradient (∂d/∂x, ∂d/∂y) over the window, px/px (zeros without slant).
-    converged : ndarray of bool, shape (N,)
-        The (d, e) update fell below ``tol`` within ``max_iter`` steps, the window stayed in the
-        image, the normal equations were well conditioned and the slant within bounds.
-    iterations : ndarray of int, shape (N,)
-    cov_unit : ndarray, shape (N, 2, 2)
-        Covariance of (d, e) per unit residual variance, px²/DN²
-        (:func:`~phonestereo.features.crlb.weighted_ls_covariance`); NaN where not converged.
-    residual_var : ndarray, shape (N,)
-        A-posteriori residual variance Σ w r² / (Σ w − tr(H⁻¹ JᵀW²J)), DN².
-    zncc : ndarray, shape (N,)
-        Weighted zero-mean NCC of the left window with the warped right window at the solution.
-    template_std : ndarray, shape (N,)
-        Weighted standard deviation of the left window, DN.
-    """
-
-    d: F64
-    e: F64
-    gain: F64
-    offset: F64
-    slant: F64
-    converged: NDArray[np.bool_]
-    iterations: I64
-    cov_unit: F64
-    residual_var: F64
-    zncc: F64
-    template_std: F64
 
 
 def gaussian_window(radius: int, sigma_w: float) -> F64:
@@ -263,6 +224,7 @@ def refine_lk(
     max_iter: int = 10,
     tol: float = 1e-3,
     max_step: float = 1.5,
+    influence: bool = False,
 ) -> Refinement:
     """Refine integer-pixel matches to sub-pixel (d, e) by Gauss–Newton.
 
@@ -288,6 +250,9 @@ def refine_lk(
         Iteration limit and convergence threshold on the (d, e) update, px.
     max_step : float
         A window that wanders farther than this from (d0, e0) is not converged, px.
+    influence : bool
+        Also return the influence images of d, e and the residual images
+        (:attr:`Refinement.influence`, :attr:`Refinement.residual`; None otherwise).
 
     Returns
     -------
@@ -324,6 +289,8 @@ def refine_lk(
     start = theta[:, :2].copy()
     ok_out, iters = np.zeros(n, bool), np.zeros(n, np.int64)
     cov, rvar, zncc = np.full((n, 2, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    infl = np.full((n if influence else 0, 2, len(wts)), np.nan, np.float32)
+    resid = np.full((n if influence else 0, len(wts)), np.nan, np.float32)
     active = np.arange(n)
     for it in range(max_iter):
         if not len(active):
@@ -375,6 +342,11 @@ def refine_lk(
             cov[ai] = c_cov[:, :2, :2]
             res = t64[ai] - a[i, None] * v64[i] - b[i, None]
             rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
+            if influence:  # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]
+                resid[ai] = res
+                hc, _ = solve_spd(hess[i], c)
+                full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
+                infl[ai] = hc[:, :2] @ full
             tc = t[i] - (t[i] @ wn32)[:, None]
             vc = val32[i] - (val32[i] @ wn32)[:, None]
             den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
@@ -394,4 +366,6 @@ def refine_lk(
         residual_var=rvar,
         zncc=zncc,
         template_std=np.sqrt((tc**2) @ wn),
+        influence=infl if influence else None,
+        residual=resid if influence else None,
     )

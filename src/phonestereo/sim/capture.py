@@ -229,14 +229,43 @@ def true_state(
     )
 
 
-def render_capture(
+@dataclass(frozen=True)
+class CapturedImage:
+    """One camera's output at a capture.
+
+    Attributes
+    ----------
+    gray : ndarray, shape (H, W), uint8
+        The grey image the pipeline reads (``io.read_gray`` of the stored file).
+    data : bytes or None
+        The file a phone stores (JPEG or PNG bytes from the ISP); None on the linear path,
+        where ``gray`` is written as a PNG.
+    suffix : str
+        ``.jpg`` or ``.png``.
+    """
+
+    gray: NDArray[np.uint8]
+    data: bytes | None
+    suffix: str
+
+
+def image_suffix(spec: ModuleSpec, role: str) -> str:
+    """Suffix of a camera's image files: ``.jpg`` if its active ISP encodes JPEG, else ``.png``."""
+    isp = spec.isp(role)
+    return ".jpg" if isp is not None and isp.jpeg_quality is not None else ".png"
+
+
+def render_capture_images(
     spec: ModuleSpec, state: CaptureState, scene: Scene, rng: np.random.Generator
-) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-    """Render both 8-bit images (wide, tele) of a capture: scene → optics → sensor.
+) -> tuple[CapturedImage, CapturedImage]:
+    """Render both cameras of a capture: scene → optics → sensor (→ ISP) → (wide, tele).
 
     Defocus blur follows each camera's focus distance (switch ``defocus``); shot and read
-    noise follow the camera's sensor spec (switch ``sensor_noise``).
+    noise follow the camera's sensor spec (switch ``sensor_noise``); a camera with an ``isp``
+    block goes through :func:`phonestereo.sim.isp.isp_file` (switch ``isp``), otherwise through
+    the linear grey :func:`phonestereo.sim.sensor.capture` (exactly the path before the ISP).
     """
+    from phonestereo.sim import isp as isp_mod
     from phonestereo.sim import optics, sensor
     from phonestereo.sim.render import render_view
 
@@ -254,5 +283,21 @@ def render_capture(
             )
         view = render_view(cs.camera, state.T_cam_world(role), scene, defocus_sigma_px=blur)
         model = sensor.SensorModel(**cam_spec.sensor.model_dump())
-        images.append(sensor.capture(view.radiance, rng, model, noise=spec.effects.sensor_noise))
+        isp = spec.isp(role)
+        if isp is None:
+            gray = sensor.capture(view.radiance, rng, model, noise=spec.effects.sensor_noise)
+            images.append(CapturedImage(gray, None, ".png"))
+        else:
+            data, suffix = isp_mod.isp_file(
+                view.radiance, isp, model, rng, noise=spec.effects.sensor_noise
+            )
+            images.append(CapturedImage(isp_mod.gray_of_file(data), data, suffix))
     return images[0], images[1]
+
+
+def render_capture(
+    spec: ModuleSpec, state: CaptureState, scene: Scene, rng: np.random.Generator
+) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """The two grey 8-bit images (wide, tele) the pipeline reads (:func:`render_capture_images`)."""
+    wide, tele = render_capture_images(spec, state, scene, rng)
+    return wide.gray, tele.gray

@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from phonestereo.errors import InputError, PhysicsError
 from phonestereo.geometry import LENS_MODELS, LensModel, make_lens
+from phonestereo.sim.isp_spec import IspSpec
 
 PRESET_PACKAGE = "phonestereo.sim"
 _STRICT = ConfigDict(extra="forbid", frozen=True)
@@ -62,7 +63,8 @@ class LensSpec(BaseModel):
 
 
 class SensorSpec(BaseModel):
-    """Sensor noise model (sim.sensor.SensorModel fields)."""
+    """Sensor noise model (sim.sensor.SensorModel fields); with an ISP, only its full well,
+    read noise and exposure are used (the raw bit depth and the JPEG are the ISP's)."""
 
     model_config = _STRICT
     full_well_e: float = Field(default=6000.0, gt=0)
@@ -89,6 +91,7 @@ class CameraSpec(BaseModel):
     heating_drift_px: tuple[float, float] = (0.0, 0.0)
     sag_px_per_g: float = 0.0
     sensor: SensorSpec = SensorSpec()
+    isp: IspSpec | None = None  # None: the raw linear grey path (sim.sensor.capture)
 
     @model_validator(mode="after")
     def _physics(self) -> CameraSpec:
@@ -239,6 +242,7 @@ class EffectsSpec(BaseModel):
     factory_noise: bool = True
     sensor_noise: bool = True
     defocus: bool = True
+    isp: bool = True  # off: the linear grey sensor path, whatever the cameras' isp blocks
 
 
 EFFECT_NAMES: tuple[str, ...] = tuple(EffectsSpec.model_fields)
@@ -278,6 +282,10 @@ class ModuleSpec(BaseModel):
             raise InputError(f"camera role must be 'wide' or 'tele', got {role!r}")
         cam: CameraSpec = getattr(self, role)
         return cam
+
+    def isp(self, role: str) -> IspSpec | None:
+        """The ISP a camera's images go through, or None (no isp block, or switch ``isp`` off)."""
+        return self.camera(role).isp if self.effects.isp else None
 
     def with_effects(self, **switches: bool) -> ModuleSpec:
         """A copy with some effect switches changed, e.g. ``spec.with_effects(heating=False)``."""
@@ -378,6 +386,7 @@ __all__ = [
     "FactoryNoiseSpec",
     "HandheldSpec",
     "HeatingSpec",
+    "IspSpec",
     "LensSpec",
     "ModuleSpec",
     "ReportsSpec",

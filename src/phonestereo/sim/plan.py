@@ -26,6 +26,7 @@ from phonestereo.sim.capture import (
     CaptureConditions,
     CaptureState,
     calibration_rig,
+    image_suffix,
     true_state,
 )
 from phonestereo.sim.factory import factory_calibration
@@ -96,8 +97,8 @@ class Plan:
             entries.append(
                 CaptureEntry(
                     id=c.id,
-                    wide=f"{image_dir}/{c.id}_wide.png",
-                    tele=f"{image_dir}/{c.id}_tele.png",
+                    wide=f"{image_dir}/{c.id}_wide{image_suffix(self.module, 'wide')}",
+                    tele=f"{image_dir}/{c.id}_tele{image_suffix(self.module, 'tele')}",
                     time_s=round(c.time_s, 6),
                     gravity=(gx, gy, gz),
                     orientation=st.orientation,

@@ -4,13 +4,13 @@ The folder is what a phone app plus a factory would give (docs/capture-set.md)::
 
     OUT/manifest.json         captures (only what the module reports)
     OUT/calibration.json      the imperfect factory calibration
-    OUT/images/<id>_wide.png  8-bit grey images
-    OUT/images/<id>_tele.png
+    OUT/images/<id>_wide.jpg  the ISP's JPEG (colour, as a phone stores it); .png for the
+    OUT/images/<id>_tele.jpg  linear grey path (no isp block or the ``isp`` effect off)
     OUT/ground_truth.json     sim only: read by evaluation/, never by the pipeline
 
 Every byte is a function of (scenario, module, seed, config): images are rendered with their
-own random stream per capture and written as PNG with fixed settings; the JSON files are
-written with sorted, ``repr``-exact numbers.
+own random stream per capture and written as the ISP's JPEG bytes or as PNG with fixed settings;
+the JSON files are written with sorted, ``repr``-exact numbers.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from typing import Any
 
 from phonestereo.errors import InputError
 from phonestereo.io import save_calibration, write_image, write_manifest
-from phonestereo.sim.capture import render_capture
+from phonestereo.sim.capture import render_capture_images
 from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, write_ground_truth
 from phonestereo.sim.plan import STREAM_RENDER, Plan, stream
 
@@ -46,9 +46,13 @@ def _render_one(job: tuple[Any, ...]) -> str:
     """Render and write one capture (a process-pool job)."""
     module, state, scene, seed, scenario, index, path_wide, path_tele = job
     rng = stream(seed, scenario, STREAM_RENDER, index)
-    wide, tele = render_capture(module, state, scene, rng)
-    write_image(path_wide, wide)
-    write_image(path_tele, tele)
+    images = render_capture_images(module, state, scene, rng)
+    for path, image in zip((path_wide, path_tele), images, strict=True):
+        if image.data is None:
+            write_image(path, image.gray)
+        else:  # the ISP's file bytes, as a phone stores them (no re-encoding)
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            Path(path).write_bytes(image.data)
     return str(state.id)
 
 
