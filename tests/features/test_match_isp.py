@@ -1,31 +1,19 @@
 """The matcher on phone-like images (issue #16): degraded real pairs, ISP renders, phone pairs.
 
-Helpers are the benchmarks' (benchmarks/bench_match_isp.py, bench_match_phone.py), so the tests
-and the printed tables measure the same thing. Measured figures are in the comments; cases that
+Helpers are in tests/_support (match_isp.py, match_phone.py), shared with the benchmarks
+bench_match_isp.py and bench_match_phone.py, so the tests and the printed tables measure the
+same thing. Measured figures are in the comments; cases that
 miss the issue's acceptance are strict xfails that say by how much.
 """
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from _support import match_isp as isp
+from _support import match_phone as phone
 
-def _load(name: str):  # a benchmark module
-    spec = importlib.util.spec_from_file_location(
-        f"{name}_for_test", Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-isp = _load("bench_match_isp")
-phone = _load("bench_match_phone")
 needs_data = pytest.mark.skipif(
     not isp.bench.DATA.exists(), reason="shared/data not beside the clone"
 )

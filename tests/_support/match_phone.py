@@ -1,0 +1,94 @@
+"""The sparse matcher on real phone pairs: ../shared/data/phone_wide_ultra (issue #16 item 4).
+
+Real ultra-wide (our ``wide``) + wide (our ``tele``) 480 × 424 JPEGs out of a phone's ISP, with a
+third party's OpenCV calibration (camera 1 = the phone's wide = our tele). Per pair, through the
+product: the calibration converted by :func:`phonestereo.io.opencv_yaml.import_opencv_yaml`
+(``convert-calibration … --first-camera tele``), the pair rectified in canonical mode
+(:class:`phonestereo.rectification.rectify.Rectification`, the tele's field of view), matched
+with :func:`phonestereo.features.matching.match_rectified` both ways. Reported: the matches,
+the median |e| (row error after rectification, px) and the left→right vs right→left
+consistency: the pair is matched again with the images swapped and mirrored (x → W − 1 − x keeps
+d > 0), matches are paired by position (same left pixel within 1 px: the mirrored right point
+x − d), and RMS of (d_LR − d_RL) / √(σ_LR² + σ_RL²) is reported (≈ 1 for honest σ).
+
+``python benchmarks/bench_match_phone.py`` prints the per-pair table.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from _support import SHARED_DATA
+from phonestereo.features.matching import MatchConfig, match_rectified
+from phonestereo.io.images import read_gray
+from phonestereo.io.opencv_yaml import import_opencv_yaml
+from phonestereo.rectification.options import RectifyOptions
+from phonestereo.rectification.rectify import Rectification
+
+DATA = SHARED_DATA / "phone_wide_ultra"
+SIZE = (480, 424)
+#: the misfit floor also after blur equalisation: the phone's tele, downscaled to the wide's
+#: scale, is sharper and gets blurred, and the computed noise of the blurred image (white-noise
+#: model) is far below the ISP's correlated misfit (floors 16–74 noise variances measured)
+CONFIG = MatchConfig(floor_after_blur=True)
+MAX_DISPARITY = 64  # px at the wide's rectified scale: 1 m at f ≈ 390 px, B ≈ 1.9 cm gives 7.5
+
+
+def pairs() -> list[tuple[str, Path, Path]]:
+    """(name, wide = phone's ultra-wide, tele = phone's wide) of every frame pair, sorted."""
+    out = []
+    for folder in sorted(p for p in DATA.iterdir() if p.is_dir()):
+        for ultra in sorted(folder.glob("*ultra*.jpg")):
+            wide_phone = ultra.with_name(ultra.name.replace("ultra", "wide"))
+            if wide_phone.exists():
+                out.append((f"{folder.name.split('_')[0]}/{ultra.stem}", ultra, wide_phone))
+    return out
+
+
+@lru_cache(maxsize=1)
+def rectification() -> Rectification:
+    """The canonical rectification from the third party's calibration, through the product."""
+    cal = import_opencv_yaml(
+        DATA / "intrinsics.yml",
+        DATA / "extrinsics.yml",
+        wide_size=SIZE,
+        tele_size=SIZE,
+        first_camera="tele",
+    )
+    return Rectification.from_rig(cal.rig, "canonical", RectifyOptions())
+
+
+def consistency(left: np.ndarray, right: np.ndarray) -> dict[str, Any]:
+    """Matches both ways on a rectified pair and their left→right / right→left agreement."""
+    lr = match_rectified(left, right, max_disparity=MAX_DISPARITY, config=CONFIG)
+    w = left.shape[1]
+    # right→left: the right image is the new left; mirrored, so that d stays positive
+    rl = match_rectified(right[:, ::-1], left[:, ::-1], max_disparity=MAX_DISPARITY, config=CONFIG)
+    # a right→left match at mirrored (x', y) is the left point x = W − 1 − x' + d
+    back = np.column_stack([w - 1 - rl.xy[:, 0] + rl.d, rl.xy[:, 1] + rl.e])
+    z = np.full(0, np.nan)
+    if len(lr) and len(rl):
+        dist, j = cKDTree(back).query(lr.xy, distance_upper_bound=1.0)
+        hit = np.isfinite(dist)
+        i, j = np.flatnonzero(hit), j[hit]
+        z = (lr.d[i] - rl.d[j]) / np.hypot(lr.sigma_d[i], rl.sigma_d[j])
+    return {
+        "matches": len(lr),
+        "matches_rl": len(rl),
+        "median_abs_e_px": float(np.median(np.abs(lr.e))) if len(lr) else float("nan"),
+        "median_sigma_d_px": float(np.median(lr.sigma_d)) if len(lr) else float("nan"),
+        "paired": len(z),
+        "rms_z": float(np.sqrt(np.mean(z**2))) if len(z) else float("nan"),
+        "reason": lr.reason,
+    }
+
+
+def evaluate(wide: Path, tele: Path) -> dict[str, Any]:
+    """Rectify one real pair and match it both ways (see :func:`consistency`)."""
+    left, right = rectification().remap(read_gray(wide), read_gray(tele))
+    return consistency(np.asarray(left), np.asarray(right))
