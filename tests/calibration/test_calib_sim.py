@@ -54,7 +54,10 @@ from phonestereo.sim.ground_truth import ground_truth_json
 from phonestereo.sim.module import load_module
 from phonestereo.sim.scenarios import plan_scenario
 
-SPEC = load_module("folded-x3")
+# The linear sensor path (isp off): these tests check the solver against a sensor-noise model.
+# On the presets' phone-ISP renders (CFA, demosaicing, sharpening, JPEG) corners carry a
+# structured error the model lacks: RMS per point 0.074 px instead of < 0.02 (issue #16).
+SPEC = load_module("folded-x3").with_effects(isp=False)
 #: Fast variant: the 9 sensor positions once, 3 tele poses.
 FAST = CalibrationConfig(wide_poses=9, tele_poses=3)
 

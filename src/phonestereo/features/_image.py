@@ -72,21 +72,30 @@ def pyramid(image: F32, levels: int) -> list[F32]:
     return out
 
 
+_MAP_COLS = 4096  # points per row of the remap grid (OpenCV maps stay < SHRT_MAX)
+
+
 def sample(image: F32, points: Any) -> F32:
     """Bilinear samples of ``image`` at pixel (x, y) ``points`` (..., 2); borders replicated."""
     p = np.asarray(points, dtype=np.float32)
     lead = p.shape[:-1]
-    flat = p.reshape(-1, 1, 2)
-    if flat.shape[0] == 0:
+    n = int(np.prod(lead))
+    if n == 0:
         return np.zeros(lead, dtype=np.float32)
+    # cv2.remap needs maps under 32767 rows and columns: lay the points out as a 2-D grid
+    cols = min(n, _MAP_COLS)
+    rows = -(-n // cols)
+    grid = np.zeros((rows * cols, 2), np.float32)
+    grid[:n] = p.reshape(-1, 2)
+    grid = grid.reshape(rows, cols, 2)
     out = cv2.remap(
         image,
-        np.ascontiguousarray(flat[..., 0]),
-        np.ascontiguousarray(flat[..., 1]),
+        np.ascontiguousarray(grid[..., 0]),
+        np.ascontiguousarray(grid[..., 1]),
         cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    return np.asarray(out, dtype=np.float32).reshape(lead)
+    return np.asarray(out, dtype=np.float32).reshape(-1)[:n].reshape(lead)
 
 
 def noise_sigma(image: F32) -> float:
