@@ -195,8 +195,8 @@ def get_command(name: str) -> BatchCommand:
 def parse_params(cmd: BatchCommand, pairs: list[str] | dict[str, Any] | None) -> dict[str, Any]:
     """``["key=value", ...]`` (or a dict) → the command's parameters, typed like the defaults.
 
-    >>> parse_params(COMMANDS["learn"], ["ipd_mm=61.5"])
-    {'ipd_mm': 61.5}
+    >>> parse_params(COMMANDS["learn"], ["ipd_mm=61.5"])  # the rest keep their defaults
+    {'ipd_mm': 61.5, 'population': 'false', 'config': ''}
     """
     given: dict[str, Any] = {}
     items = pairs.items() if isinstance(pairs, dict) else (p.split("=", 1) for p in pairs or [])
