@@ -207,7 +207,7 @@ def _top(stats: pstats.Stats, n_calls: int, k: int = 12) -> list[dict[str, Any]]
             "function": f"{where}:{line}({name})", "calls_per_capture": round(nc / n_calls, 1),
             "own_ms_per_capture": round(1000 * tt / n_calls, 2),
             "cum_ms_per_capture": round(1000 * ct / n_calls, 2),
-        })  # fmt: skip
+        })
     return out
 
 
@@ -252,7 +252,7 @@ def sgbm_roi(left: np.ndarray, right: np.ndarray, box: Any, d_max: int) -> np.nd
     sgbm = cv2.StereoSGBM_create(  # type: ignore[attr-defined]
         minDisparity=0, numDisparities=nd, blockSize=bs, P1=8 * bs * bs, P2=32 * bs * bs,
         uniquenessRatio=10, speckleWindowSize=100, speckleRange=2,
-    )  # fmt: skip
+    )
     d = sgbm.compute(a, b).astype(np.float32) / 16.0
     d = d[:, x - xs :]
     return np.where(d > 0, d, np.nan)
@@ -352,7 +352,7 @@ def bench_application(
             "sgbm_median_disparity_px": None if not np.isfinite(d_sgbm).any()
             else round(float(np.nanmedian(d_sgbm)), 3),
             "window_px": [int(box[2]), int(box[3])], "d_max_px": d_max,
-        })  # fmt: skip
+        })
     stats = _profile(lambda: [application.run(cfg, inputs(e)) for e in entries])
     variants = []
     base = {r["capture_id"]: r["disparity_px"] for r in rows}
@@ -370,7 +370,7 @@ def bench_application(
             "max_keypoints": n, "median_ms": round(1000 * float(np.median(ts_n)), 2),
             "n_ok": len(dd), "max_abs_disparity_change_px": round(max(dd), 4) if dd else None,
             "median_abs_rel_err": _median_abs(errs),
-        })  # fmt: skip
+        })
     med = float(np.median([r["ms"] for r in rows]))
     med_sgbm = float(np.median([r["sgbm_ms"] for r in rows]))
     med_remap = float(np.median([r["window_remap_ms"] for r in rows]))
@@ -426,7 +426,7 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
                 "capture_id": e.id, "ok": r.ok, "gate": r.gate, "n_obs": len(r.observations),
                 "total_ms": round(1000 * total, 1), "landmarks_ms": round(1000 * tb.seconds, 1),
                 "rest_ms": round(1000 * (total - tb.seconds), 1),
-            })  # fmt: skip
+            })
         # The rest, profiled, with the landmarks served from a cache (filled first).
         cache = CachedBackend(mp)
         for e in entries:
@@ -471,7 +471,7 @@ def landmark_variants(
             n_wide, n_tele = n_wide + len(fw.faces), n_tele + len(ft.faces)
         out.append({"variant": label, "median_ms": round(1000 * float(np.median(ts)), 1),
                     "faces_found": n_wide + n_tele, "wide_faces": n_wide,
-                    "tele_faces": n_tele})  # fmt: skip
+                    "tele_faces": n_tele})
     return out
 
 
@@ -499,7 +499,7 @@ def run(set_dir: Path | None, repeat: int) -> dict[str, Any]:
         "render_s": round(render_s, 1), "application": app, "learning": learn,
         "seconds": round(time.perf_counter() - t0, 1),
         "load_average_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
-    }  # fmt: skip
+    }
 
 
 def _print(res: dict[str, Any]) -> None:
@@ -510,46 +510,46 @@ def _print(res: dict[str, Any]) -> None:
     print(f"{'application phase, median ms/capture':48s} {a['median_ms']:10.1f} {50:8d}")
     print(f"{'application phase, max ms/capture':48s} {a['max_ms']:10.1f}")
     print(f"{'  + reference rectification, once per calibration':48s} "
-          f"{a['reference_rectification_ms_per_calibration']:10.1f}")  # fmt: skip
+          f"{a['reference_rectification_ms_per_calibration']:10.1f}")
     print(f"{'application phase, median CPU ms/capture':48s} {a['median_cpu_ms']:10.1f}")
     print(f"{'verification captures measured (ok / all)':48s} "
-          f"{a['n_ok']:>5d} / {len(a['captures'])}")  # fmt: skip
+          f"{a['n_ok']:>5d} / {len(a['captures'])}")
     print(f"{'  median |relative depth error| vs truth':48s} {a['median_abs_rel_err']!s:>10s}")
     print(f"{'cv2.StereoSGBM on the same window, median ms':48s} {a['sgbm_median_ms']:10.1f}")
     print(f"{'  SGBM ROI median within 0.5 px of ours':48s} "
-          f"{a['sgbm_agrees_within_0p5px']:>5d} / {len(a['captures'])}")  # fmt: skip
+          f"{a['sgbm_agrees_within_0p5px']:>5d} / {len(a['captures'])}")
     print(f"{'  + window remap, median ms':48s} {a['sgbm_plus_remap_median_ms']:10.1f}")
     print(f"{'ratio ours / (SGBM + remap)':48s} {a['ratio_ours_to_sgbm_plus_remap']:10.2f}")
     for v in a["keypoint_variants"]:
         label = f"  with max_keypoints {v['max_keypoints']} (not {a['default_max_keypoints']}), ms"
         print(f"{label:48s} "
               f"{v['median_ms']:10.1f}   max |Δd| {v['max_abs_disparity_change_px']} px, "
-              f"median |rel err| {v['median_abs_rel_err']} ({v['n_ok']} ok)")  # fmt: skip
+              f"median |rel err| {v['median_abs_rel_err']} ({v['n_ok']} ok)")
     print(f"{'learning, median ms/face capture':48s} {lr['median_total_ms']:10.1f} {200:8d}")
     print(f"{'  landmarks (MediaPipe, wide + tele)':48s} {lr['median_landmarks_ms']:10.1f}")
     print(f"{'  the rest':48s} {lr['median_rest_ms']:10.1f}")
     print(f"{'  the rest, landmarks cached (re-run)':48s} "
-          f"{lr['median_rest_cached_landmarks_ms']:10.1f}")  # fmt: skip
+          f"{lr['median_rest_cached_landmarks_ms']:10.1f}")
     for v in lr["landmark_variants"]:
         label = f"  landmarks only: {v['variant']}, ms"
         print(f"{label:60s} {v['median_ms']:8.1f}   faces wide {v['wide_faces']}, "
-              f"tele {v['tele_faces']}")  # fmt: skip
+              f"tele {v['tele_faces']}")
     print("\napplication phase blocks (cProfile, cumulative ms per capture):")
     for b in a["blocks_profiled"]:
         print(f"  {b['block']:44s} {b['ms_per_capture']:8.2f}")
     print("\napplication phase, top functions by own time (cProfile, ms per capture):")
     for t in a["top_functions_profiled"]:
         print(f"  {t['own_ms_per_capture']:7.2f} own {t['cum_ms_per_capture']:7.2f} cum "
-              f"{t['calls_per_capture']:7.1f} calls  {t['function']}")  # fmt: skip
+              f"{t['calls_per_capture']:7.1f} calls  {t['function']}")
     print("\nlearning (without landmarks) blocks (cProfile, cumulative ms per capture):")
     for b in lr["blocks_rest_profiled"]:
         print(f"  {b['block']:44s} {b['ms_per_capture']:8.2f}")
     print("\nlearning (without landmarks), top functions by own time (ms per capture):")
     for t in lr["top_functions_rest_profiled"]:
         print(f"  {t['own_ms_per_capture']:7.2f} own {t['cum_ms_per_capture']:7.2f} cum "
-              f"{t['calls_per_capture']:7.1f} calls  {t['function']}")  # fmt: skip
+              f"{t['calls_per_capture']:7.1f} calls  {t['function']}")
     print(f"\ntotal {res['seconds']} s (render {res['render_s']} s); load average "
-          f"{res['load_average_1min']} on {res['cpus']} CPUs")  # fmt: skip
+          f"{res['load_average_1min']} on {res['cpus']} CPUs")
 
 
 def main() -> None:

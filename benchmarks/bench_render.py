@@ -153,7 +153,7 @@ def main() -> None:
     for kind, sfx in (("wall", "s"), ("CPU", "cpu_s")):
         lin, full, extra = isp[f"linear_{sfx}"], isp[f"isp_{sfx}"], isp[f"extra_{sfx}"]
         print(f"  {kind:4s} linear grey sensor {lin:.3f} s, phone ISP {full:.3f} s "
-              f"(x{full / lin:.1f}); ISP extra {extra:.3f} s/pair; target <= 0.5 s")  # fmt: skip
+              f"(x{full / lin:.1f}); ISP extra {extra:.3f} s/pair; target <= 0.5 s")
     if args.profile:
         prof = cProfile.Profile()
         prof.enable()

@@ -61,7 +61,7 @@ def screenshot(
             exe, "--headless", "--disable-gpu", "--no-sandbox", "--disable-dev-shm-usage",
             "--hide-scrollbars", f"--user-data-dir={profile}", f"--screenshot={png_path}",
             f"--window-size={size[0]},{size[1]}", Path(html_path).resolve().as_uri(),
-        ]  # fmt: skip
+        ]
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
     if not png_path.is_file():
         tail = (proc.stderr or "").strip().splitlines()[-5:]
@@ -127,7 +127,7 @@ def run(set_dir: Path | None, out_dir: Path) -> dict[str, Any]:
         "embedded_png": text.count('src="data:image/png;base64,'),
         "render_s": round(t1 - t0, 1), "bench_s": round(t2 - t1, 1),
         "full_median_rel_err": res["stages"]["full"]["median_rel_err"],
-    }  # fmt: skip
+    }
     png = out_dir / "report.png"
     try:
         t3 = time.perf_counter()

@@ -76,7 +76,7 @@ def test_infinite_t_is_reported_under_t(tmp_path: Path) -> None:
     code, msg = _run(
         "rectify", str(img), str(img), "--calibration", str(path), "--mode", "canonical",
         "--out", str(tmp_path / "r"),
-    )  # fmt: skip
+    )
     assert code == 2, msg
     # Was: "field 'T_tele_wide.R': t must be finite".
     assert "field 'T_tele_wide.t'" in msg and "finite" in msg and "T_tele_wide.R" not in msg

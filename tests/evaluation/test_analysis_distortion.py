@@ -55,7 +55,7 @@ def test_files(odd_result) -> None:
     res, out = odd_result
     names = sorted(p.name for p in res.files)
     assert names == ["distortion.json", "distortion_e_map.png", "distortion_per_capture.png",
-                     "distortion_radial.png"]  # fmt: skip
+                     "distortion_radial.png"]
     for p in res.files:
         if p.suffix == ".png":
             img = cv2.imread(str(p))
@@ -124,7 +124,7 @@ def test_distortion_changes_with_focus(tmp_path: Path) -> None:
                 shutil.copy(sub / p, both / "images" / f"{new}_{role}.png")
             entries.append(c.model_copy(update={
                 "id": new, "wide": f"images/{new}_wide.png", "tele": f"images/{new}_tele.png",
-                "focus_group": f"{z} m"}))  # fmt: skip
+                "focus_group": f"{z} m"}))
     manifest = load_capture_set(both).manifest
     write_manifest(both, manifest.model_copy(update={"captures": entries}))
     (tmp_path / "out").mkdir()

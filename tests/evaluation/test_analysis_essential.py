@@ -73,7 +73,7 @@ def test_files(result) -> None:
     names = sorted(p.name for p in res.files)
     assert names == [
         "essential.json", "essential_pose.png", "essential_ranges.png", "essential_scales.png"
-    ]  # fmt: skip
+    ]
     for p in res.files:
         if p.suffix == ".png":
             img = cv2.imread(str(p))

@@ -73,7 +73,7 @@ def test_files_readable(result: Any) -> None:
     res, out = result
     names = sorted(p.name for p in res.files)
     assert names == ["repeatability.json", "repeatability_averaging.png",
-                     "repeatability_corner_range.png", "repeatability_scales.png"]  # fmt: skip
+                     "repeatability_corner_range.png", "repeatability_scales.png"]
     for p in res.files:
         if p.suffix == ".png":
             img = cv2.imread(str(p))

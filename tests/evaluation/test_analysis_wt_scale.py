@@ -77,7 +77,7 @@ def test_refocus_files_readable(refocus_result: Any) -> None:
     res, out = refocus_result
     names = sorted(p.name for p in res.files)
     assert names == ["wt_scale.json", "wt_scale_corner_range.png", "wt_scale_maps.png",
-                     "wt_scale_scales.png"]  # fmt: skip
+                     "wt_scale_scales.png"]
     for p in res.files:
         if p.suffix == ".png":
             img = cv2.imread(str(p))
@@ -104,7 +104,7 @@ def test_focus_fail_detected_on_a_blurred_capture(refocus_set: Path, tmp_path: P
 def dual_result(tmp_path_factory: pytest.TempPathFactory) -> Any:
     """folded-x3, every effect on, two charts (near 1 m, far 2 m), 2 attempts."""
     folder = _render(tmp_path_factory.mktemp("wt_dual") / "set", "dual-depth",
-                     DualDepthConfig(attempts=2), False)  # fmt: skip
+                     DualDepthConfig(attempts=2), False)
     return run(folder, tmp_path_factory.mktemp("wt_dual_out"))
 
 
@@ -156,7 +156,7 @@ def test_refocus_all_effects(tmp_path: Path) -> None:
 def test_autofocus_failure_flagged_and_left_out(tmp_path: Path) -> None:
     # seed 0, 20 AF attempts: the wide's AF misses on attempt 16 (focus at 0.1 m, truth)
     folder = _render(tmp_path / "set", "refocus", StackConfig(attempts=20, focus_mode="auto"),
-                     False)  # fmt: skip
+                     False)
     res = run(folder, tmp_path)
     fails = [r["attempt"] for r in res.table["captures"] if r["focus_fail"]]
     assert fails == [16]

@@ -188,7 +188,7 @@ def test_cli_study_runs_on_a_local_cluster(tmp_path: Path) -> None:
             "study", "--module", "folded-x3", "--tolerances", str(tol), "--samples", "12",
             "--out", str(tmp_path / "o"), "--quick", "--workers", "1", "--json",
         ],
-    )  # fmt: skip
+    )
     assert r.exit_code == 0, r.output
     summary = json.loads(r.output)
     assert summary["n_ok"] == 12 and summary["top"][0].endswith("heating_drift_px.1")

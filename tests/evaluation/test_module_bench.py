@@ -33,7 +33,7 @@ def _fake_row(seed: int, ranges: dict[str, Any], work: str, keep_images: bool) -
         "gated": 1 if good else 4, "gate_reasons": json.dumps({"measure: ZNCC": 1 if good else 4}),
         "max_abs_err_over_sigma": 2.0 if good else 5.0, "over_4_sigma": 0 if good else 1,
         "observations": 40,
-    }  # fmt: skip
+    }
 
 
 def test_parse_seeds_and_errors() -> None:
@@ -58,7 +58,7 @@ def test_bench_rows_distribution_figure_and_resume(tmp_path, monkeypatch) -> Non
     # seeds 10, 12 good; 11 bad; 13 failed (not counted among the 3 ok modules)
     assert acc == {"median_le_1pct": 2, "p90_le_2p5pct": 2, "within_sigma_50_90pct": 2,
                    "captures_over_4_sigma": 1, "measured_fraction": round(24 / 30, 4),
-                   "of_modules": 3}  # fmt: skip
+                   "of_modules": 3}
     assert res.distribution["gate_reasons"] == {"measure: ZNCC": 6}
     assert res.distribution["quantiles"]["median_rel_err"]["max"] == 0.02
     for name in ("modules.csv", "distribution.json", "modules.png"):

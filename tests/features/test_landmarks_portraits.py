@@ -58,7 +58,7 @@ def test_every_portrait_has_one_face_with_both_pupils(measured) -> None:
 @needs_data
 def test_iris_and_eye_contour_ipd_agree(measured) -> None:
     ratios = {n: m["scales"][0].faces[0].eye_centre_ipd_px / m["scales"][0].faces[0].ipd_px
-              for n, m in measured.items()}  # fmt: skip
+              for n, m in measured.items()}
     dev = {n: abs(r - 1) for n, r in ratios.items()}
     # Measured (2 cores, MediaPipe 0.10.21): 7 of 8 within 3 % (median 1.1 %); interfaces_011
     # at 3.8 %: her image-left iris sits laterally in the eye opening (gaze/anatomy: the

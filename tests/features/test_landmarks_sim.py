@@ -51,7 +51,7 @@ def _errors(pc: PlannedCapture, backend: MediaPipeBackend) -> dict[str, np.ndarr
     cam = pc.truth.wide.true_camera()
     pupils = np.array([f.pupils_px for f in res.faces])
     match = [int(np.nanargmin(np.linalg.norm(true_px.mean(1) - f.midpoint_px, axis=1)))
-             for f in res.faces]  # fmt: skip
+             for f in res.faces]
     assert np.allclose(pupils, true_px[match], atol=2.0)  # every face is a chart face
     z = true_z[match]
     yaw = np.array([f.yaw_rad for f in res.faces])

@@ -45,7 +45,7 @@ def _capture(
 ) -> tuple[np.ndarray, np.ndarray]:
     p = points if motion is None else motion.apply(points)
     true = Rig(WIDE.scaled(s_wide).shifted(*shift[:2]), TELE.scaled(s_tele).shifted(*shift[2:]),
-               RIG.T_tele_wide)  # fmt: skip
+               RIG.T_tele_wide)
     qw, qt = true.project(p)
     if noise and rng is not None:
         qw = qw + rng.normal(0, noise, qw.shape)

@@ -51,7 +51,7 @@ def test_cluster_disparities_one_label_per_depth() -> None:
     rng = np.random.default_rng(0)
     # charts at 1 m and 2 m (f·B = 18 px·m), 0.05 px matching noise; 3 outliers at 30 px
     d = np.r_[18 + 0.05 * rng.standard_normal(60), 9 + 0.05 * rng.standard_normal(200),
-              30 + 0.1 * rng.standard_normal(3), np.nan]  # fmt: skip
+              30 + 0.1 * rng.standard_normal(3), np.nan]
     lab = cluster_disparities(d)
     assert (lab[:60] == 0).all() and (lab[60:260] == 1).all()
     assert (lab[260:] == -1).all()  # 3 members < MIN_POINTS, and the NaN

@@ -55,7 +55,7 @@ def test_rotation_only_depends_on_depth_canonical_does_not() -> None:
     tc = TranslationComponents.from_rig(rig)
     qr = before.points_wide(qw)
     pred = predicted_nondisparity_px(tc, before.f_px, np.repeat([1.0, 2.0], 81),
-                                     qr[:, 1] - before.wide_rect.cy)  # fmt: skip
+                                     qr[:, 1] - before.wide_rect.cy)
     assert ag_b.spread_px == pytest.approx(depth_agreement(pred, lab).spread_px, rel=0.05)
     assert ag_b.spread_px > 0.25
     assert ag_a.spread_px < 1e-9  # exact with a perfect calibration

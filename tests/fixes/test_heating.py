@@ -95,7 +95,7 @@ def test_time_gate_rejects_cold_and_passes_warm() -> None:
     gate = WarmupGate()  # the thesis's 3 minutes
     assert gate.min_time_s == 180.0
     cold = CaptureEntry(id="c", wide="w.png", tele="t.png", time_s=30.0, orientation="landscape",
-                        kind="verification")  # fmt: skip
+                        kind="verification")
     warm = cold.model_copy(update={"time_s": 240.0})
     r_cold, r_warm = gate.check(cold), gate.check(warm)
     assert not r_cold.passed and "not warmed up" in r_cold.reason and "180" in r_cold.reason

@@ -18,7 +18,7 @@ SMALL = BenchConfig(
     LearningConfig(distances_m=(1.0, 2.0, 3.0), positions=((0, 0), (0.5, 0), (0, 0.5)),
                    attempts=1),
     VerificationConfig(distances_m=(1.2, 2.4), attempts=2),
-)  # fmt: skip
+)
 
 
 @pytest.fixture(scope="module")
@@ -46,10 +46,10 @@ def test_learn_then_depth_on_the_cli(bench_set: Path, tmp_path: Path) -> None:
     store = tmp_path / "fixes.sqlite"
     cal = bench_set / "calibration.json"
     r = runner.invoke(app, ["learn", str(bench_set), "--calibration", str(cal),
-                            "--store", str(store), "--json"])  # fmt: skip
+                            "--store", str(store), "--json"])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["depth", str(bench_set), "--calibration", str(cal),
-                            "--store", str(store), "--json"])  # fmt: skip
+                            "--store", str(store), "--json"])
     assert r.exit_code == 0, r.output
     res = json.loads(r.stdout)["results"]
     assert len(res) == 4 and all(x["ok"] and x["sigma_m"] > 0 for x in res)
@@ -61,7 +61,7 @@ def test_depth_without_a_store_or_with_a_cold_capture_says_why(
     runner = CliRunner()
     cal = bench_set / "calibration.json"
     r = runner.invoke(app, ["depth", str(bench_set), "--calibration", str(cal),
-                            "--store", str(tmp_path / "none.sqlite")])  # fmt: skip
+                            "--store", str(tmp_path / "none.sqlite")])
     assert r.exit_code == 2 and "learn" in r.output
     r = runner.invoke(app, ["evaluate", str(tmp_path)])
     assert r.exit_code == 2

@@ -86,7 +86,7 @@ def _obs(n: int = 40, offset: float = -2.5, gain: float = 0.01) -> list[Observat
         x, y, d = rng.uniform(200, 500), rng.uniform(200, 600), rng.uniform(6, 20)
         c = offset + gain * d
         out.append(Observation(x, y, d, d + c, 1.5, "landscape", "g", 300.0 + i, None,
-                               f"cap{i // 2}", "face-chart", 0.02))  # fmt: skip
+                               f"cap{i // 2}", "face-chart", 0.02))
     return out
 
 
@@ -124,7 +124,7 @@ def test_focus_correction_scales_the_cameras() -> None:
     rig = _rig()
     c = np.array([rig.tele.cx, rig.tele.cy])
     fc = FocusCorrection(ScaleOffset.identity([rig.wide.cx, rig.wide.cy]),
-                         ScaleOffset(1.001, np.array([5.0, 0.0]), c))  # fmt: skip
+                         ScaleOffset(1.001, np.array([5.0, 0.0]), c))
     out = fc.apply(rig)
     # This attempt's tele is 1/1.001 of the median; the hand's offset is not applied.
     assert out.tele.fx == pytest.approx(rig.tele.fx / 1.001, rel=1e-12)

@@ -21,7 +21,7 @@ def _faces(distances_m: tuple[float, ...], seed: int = 0, gain: float = -0.05) -
             x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
             c = 0.3 + gain * d_true
             out.append(Observation(x, y, d_true - c, d_true * scale + rng.normal(0, 0.02),
-                                   z, "landscape", "", 300.0, None, f"c{g}"))  # fmt: skip
+                                   z, "landscape", "", 300.0, None, f"c{g}"))
     return out
 
 

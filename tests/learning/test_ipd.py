@@ -44,7 +44,7 @@ def test_eq11_values_and_errors() -> None:
 @given(
     x=st.floats(-1.2, 1.2), y=st.floats(-0.5, 0.5), z=st.floats(0.8, 4.0),
     yaw=st.floats(-0.6, 0.6),
-)  # fmt: skip
+)
 def test_face_depth_is_exact_for_a_turned_face_anywhere(
     x: float, y: float, z: float, yaw: float
 ) -> None:

@@ -71,7 +71,7 @@ def draw(path: Path) -> Path:
     ax.loglog(n, 100 * np.quantile(err, 1 - ALPHA, axis=0), "k", label="95 % of runs below")
     ax.loglog(n, 100 * error_bound(n, sigma_rel, ALPHA, "normal"), "b--", label="normal bound")
     ax.loglog(n, 100 * error_bound(n, sigma_rel, ALPHA, "chebyshev"), "r--",
-              label="Chebyshev bound (eq. 10)")  # fmt: skip
+              label="Chebyshev bound (eq. 10)")
     for bound, colour in (("normal", "b"), ("chebyshev", "r")):
         m = samples_needed(sigma_rel, 0.01, ALPHA, bound)  # type: ignore[arg-type]
         ax.axvline(m, color=colour, lw=0.6, ls=":")

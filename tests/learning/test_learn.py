@@ -98,7 +98,7 @@ def learn_set(
     cs = load_capture_set(folder)
     with FixStore(store) as fs:
         return run(FlowConfig(), cs, load_calibration(cs.calibration_path()), fs,
-                   backend=backend, ipd=ipd)  # fmt: skip
+                   backend=backend, ipd=ipd)
 
 
 def test_learn_capture_set_into_store(capture_set: Path, tmp_path: Path) -> None:
@@ -322,7 +322,7 @@ def test_learn_population_is_the_flows_population_mode(
         cli_obs = fs.observations()
     cs = load_capture_set(folder)
     flow = run(FlowConfig(), cs, load_calibration(cs.calibration_path()), None,
-               backend=TruthBackend(folder), ipd=IpdMode.population())  # fmt: skip
+               backend=TruthBackend(folder), ipd=IpdMode.population())
     flow_obs = [o for c in flow.captures for o in c.observations]
     assert len(cli_obs) == len(flow_obs) > 0
     for name in FIELDS:  # identical, field by field (same code path, same inputs)

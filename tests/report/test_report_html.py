@@ -48,7 +48,7 @@ def _observations(cs_root: Path) -> list[Observation]:
             x_px=float(x), y_px=float(y), d_measured_px=d, d_expected_px=d + 0.2 + 1e-4 * x,
             depth_m=2.0, orientation="landscape", focus_group=None, time_s=300.0 + i,
             temperature_c=None, capture_id=f"L{i // 6:02d}", sigma_px=0.05,
-        ))  # fmt: skip
+        ))
     return out
 
 
@@ -69,7 +69,7 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, An
         {"distance_m": d, "naive": _stage(0.1 * d, 0.12 * d), "measured": _stage(0.08, 0.1),
          "full": _stage(0.004, 0.009), "cramer_rao_floor": _stage(0.002, 0.003)}
         for d in DISTANCES_M
-    ]  # fmt: skip
+    ]
     obs = _observations(root)
     bench = {
         "capture_set": str(root),
@@ -82,7 +82,7 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, An
         "ablation": [{"without": "wt_scale", "median_rel_err": 0.03, "p90_rel_err": 0.05,
                       "gated": 1}],
         "_observations": obs,
-    }  # fmt: skip
+    }
     path = write_report(bench, root.parent / "report.html", title="report test")
     return path, bench
 
@@ -102,7 +102,7 @@ def test_report_has_sections_table_and_figures(report: tuple[Path, dict[str, Any
         "<h2>Ablation: each fix switched the other way in turn</h2>",
         "<h2>Figures</h2>",
     ):
-        assert section in text  # fmt: skip
+        assert section in text
     # The stage table: one row per distance plus the "all" row, numbers as percentages.
     assert "<td>1.0 m</td>" in text and "<td>3.0 m</td>" in text and "<b>all</b>" in text
     assert "0.40 %" in text  # full-flow median 0.004
@@ -135,7 +135,7 @@ def test_report_screenshot_in_headless_chromium(
     png = tmp_path / "report.png"
     cmd = [exe, "--headless", "--disable-gpu", "--no-sandbox", "--disable-dev-shm-usage",
            "--hide-scrollbars", f"--user-data-dir={tmp_path / 'profile'}",
-           f"--screenshot={png}", "--window-size=1100,2400", path.resolve().as_uri()]  # fmt: skip
+           f"--screenshot={png}", "--window-size=1100,2400", path.resolve().as_uri()]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
     assert png.is_file(), proc.stderr[-2000:]
     a = np.asarray(Image.open(png).convert("RGB"))

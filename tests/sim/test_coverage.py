@@ -47,7 +47,7 @@ def test_presets_keep_the_thesis_bench(preset: str, config: BenchConfig) -> None
         c = pc.state.conditions
         assert c.focus_m == 1.5
     ver = [pc.truth.roi_depth_m for pc in plan.captures
-           if pc.state.conditions.kind == "verification"]  # fmt: skip
+           if pc.state.conditions.kind == "verification"]
     # The ROI depth is the chart distance within the 4° tilt over the ROI (< 5 cm).
     planned = np.repeat(config.verification.distances_m, config.verification.attempts)
     assert ver == pytest.approx(planned, abs=0.05)

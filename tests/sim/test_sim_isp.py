@@ -77,9 +77,9 @@ def test_cfa_pattern_round_trip_on_a_flat_colour(pattern: str) -> None:
     # A pattern mapped to the wrong OpenCV code swaps R and B (or mixes G in): off by > 50 DN.
     sens = (0.4, 1.0, 0.7)
     isp = {**PLAIN, "cfa_pattern": pattern, "channel_sensitivity": sens, "ccm_strength": 0.0,
-           "white_balance_gains": (1.0, 1.0, 1.0), "chroma_blur_px": 0.0}  # fmt: skip
+           "white_balance_gains": (1.0, 1.0, 1.0), "chroma_blur_px": 0.0}
     bgr = apply_isp(np.full((40, 40), 0.9, np.float32), IspSpec(**isp), SENSOR,
-                    np.random.default_rng(0), noise=False)  # fmt: skip
+                    np.random.default_rng(0), noise=False)
     expected = 255 * tone_curve(0.9 * SENSOR.exposure * np.array(sens[::-1]))  # B, G, R
     # ± 2 DN: raw (10-bit) and 8-bit YCrCb rounding on the way.
     assert np.abs(bgr[5:-5, 5:-5].reshape(-1, 3) - expected).max() <= 2.0
@@ -87,7 +87,7 @@ def test_cfa_pattern_round_trip_on_a_flat_colour(pattern: str) -> None:
 
 def test_white_balance_makes_grey_grey() -> None:
     bgr = apply_isp(np.full((40, 40), 0.5, np.float32), IspSpec(**PLAIN), SENSOR,
-                    np.random.default_rng(0), noise=False).astype(float)  # fmt: skip
+                    np.random.default_rng(0), noise=False).astype(float)
     # Ideal AWB: the three channels agree to the rounding of the YCrCb round trip (1 DN).
     assert np.ptp(bgr[5:-5, 5:-5].reshape(-1, 3).mean(axis=0)) <= 1.0
 
@@ -104,7 +104,7 @@ def test_noise_profile_predicts_the_flat_patch_noise() -> None:
 def test_denoise_lowers_the_flat_patch_noise() -> None:
     flat = np.full((300, 300), 0.18, np.float32)
     stds = [_gray(flat, **{**PLAIN, "denoise_strength": k})[20:-20, 20:-20].std()
-            for k in (0.0, 1.0, 2.0, 4.0)]  # fmt: skip
+            for k in (0.0, 1.0, 2.0, 4.0)]
     assert all(a > b for a, b in itertools.pairwise(stds)), stds  # stronger: less noise
     assert stds[2] < 0.7 * stds[0]  # 2σ range halves the variance at least (measured 0.60)
 
@@ -115,7 +115,7 @@ def test_denoise_keeps_edges() -> None:
     step = np.full((64, 64), 0.2, np.float32)
     step[:, 32:] = 0.8
     rows = [_gray(step, noise=False, **{**PLAIN, "denoise_strength": k}).mean(axis=0)
-            for k in (0.0, 4.0)]  # fmt: skip
+            for k in (0.0, 4.0)]
     assert np.abs(rows[0] - rows[1]).max() < 2.0  # DN
 
 

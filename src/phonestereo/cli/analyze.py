@@ -57,7 +57,7 @@ def analyze_command(
     bar = Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
         TimeRemainingColumn(), console=console, transient=True,
-    )  # fmt: skip
+    )
     try:
         with bar:
             task = bar.add_task(f"{name}: measuring captures", total=None)

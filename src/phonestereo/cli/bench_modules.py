@@ -76,7 +76,7 @@ def bench_modules(
                 seed_list, out, ranges_path=ranges, keep_images=keep_images, client=client,
                 retry_failed=retry_failed,
                 progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
-            )  # fmt: skip
+            )
     except InputError as exc:
         raise _fail(console, exc) from exc
     if as_json:
@@ -93,7 +93,7 @@ def bench_modules(
                 str(r["seed"]), f"x{r['focal_ratio']:.2f}", r["size"], _pct(r["median_rel_err"]),
                 _pct(r["p90_rel_err"]), _pct(r["within_sigma"]),
                 f"{r['measured']}/{r['captures']}", "",
-            )  # fmt: skip
+            )
         Console().print(table)
         acc = result.distribution["acceptance"]
         typer.echo(

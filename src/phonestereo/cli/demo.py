@@ -85,13 +85,13 @@ def demo(
     console = Console(stderr=True)
     n_workers = workers or min(2, os.cpu_count() or 1)
     cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-            TimeElapsedColumn())  # fmt: skip
+            TimeElapsedColumn())
     with Progress(*cols, console=console, disable=as_json, transient=True) as bar:
         task = bar.add_task("rendering", total=len(plan.captures))
         write_capture_set(
             out, plan, workers=n_workers,
             progress=lambda done, total, cid: bar.update(task, completed=done),
-        )  # fmt: skip
+        )
 
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(task, description=stage, completed=done, total=total)

@@ -131,7 +131,7 @@ def print_bench(res: dict[str, Any], title: str) -> None:
     """The stage table of a bench result (per distance; median / p90)."""
     table = Table(title=title)
     stages = (("naive", "naive"), ("measured", "fixes only"), ("full", "full flow"),
-              ("cramer_rao_floor", "matching σ"))  # fmt: skip
+              ("cramer_rao_floor", "matching σ"))
     table.add_column("distance")
     for _, label in stages:
         table.add_column(f"{label}\nmedian/p90 %", justify="right")

@@ -64,7 +64,7 @@ def draw_overlay(image: np.ndarray, det: ChartDetection) -> np.ndarray:
                 cv2.putText(
                     out, f"{r},{c}", (centre[0] + 4, centre[1] - 4), cv2.FONT_HERSHEY_SIMPLEX,
                     font, (0, 200, 255), thick, cv2.LINE_AA,
-                )  # fmt: skip
+                )
     for name, centres in det.circles.items():
         a, b = (tuple(round(float(v)) for v in p) for p in centres)
         rad = max(4, round(0.25 * float(np.hypot(*(centres[1] - centres[0])))))
@@ -74,7 +74,7 @@ def draw_overlay(image: np.ndarray, det: ChartDetection) -> np.ndarray:
         cv2.putText(
             out, name, (a[0], a[1] - rad - 4), cv2.FONT_HERSHEY_SIMPLEX, font,
             (0, 255, 0), thick, cv2.LINE_AA,
-        )  # fmt: skip
+        )
     banner = (
         f"{len(det.ids)} corners, pairs: {', '.join(det.pairs_found) or '-'}"
         if det.found
@@ -83,7 +83,7 @@ def draw_overlay(image: np.ndarray, det: ChartDetection) -> np.ndarray:
     cv2.putText(
         out, banner, (10, round(30 * max(scale, 0.5))), cv2.FONT_HERSHEY_SIMPLEX, 2 * font,
         (0, 255, 0) if det.found else (0, 0, 255), thick, cv2.LINE_AA,
-    )  # fmt: skip
+    )
     return out
 
 

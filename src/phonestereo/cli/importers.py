@@ -147,5 +147,5 @@ def import_exif_command(
         raise typer.BadParameter("must be manual or auto", param_hint="--focus-mode")
     result = _run(import_exif, wide_glob, tele_glob, calibration, out, kind=kind,
                   focus_mode=focus_mode, time_offset_s=time_offset_s, orientation=orientation,
-                  max_gap_s=max_gap_s)  # fmt: skip
+                  max_gap_s=max_gap_s)
     _report(result, as_json)

@@ -112,7 +112,7 @@ def simulate_command(
     for name in exports:
         if name not in ("android", "apple"):
             raise typer.BadParameter(f"unknown export {name!r}; choose android or apple",
-                                     param_hint="--export")  # fmt: skip
+                                     param_hint="--export")
     spec = _load(module)
     start = time.perf_counter()
     try:

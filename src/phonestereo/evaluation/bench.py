@@ -46,7 +46,7 @@ def _stats(errors: Any) -> dict[str, Any]:
     if e.size == 0:
         return {"median_rel_err": None, "p90_rel_err": None, "n": 0}
     return {"median_rel_err": round(float(np.median(e)), 6),
-            "p90_rel_err": round(float(np.percentile(e, 90)), 6), "n": int(e.size)}  # fmt: skip
+            "p90_rel_err": round(float(np.percentile(e, 90)), 6), "n": int(e.size)}
 
 
 def apply_all(
@@ -80,7 +80,7 @@ def _rows(cs: CaptureSet, results: Sequence[application.DepthResult]) -> list[di
         z_true = gt.capture(r.capture_id).roi_depth_m
         row = {"capture_id": r.capture_id, "ok": r.ok, "gate": r.gate, "reason": r.reason,
                "z_true_m": z_true, "depth_m": r.depth_m, "sigma_m": r.sigma_m,
-               "depth_uncorrected_m": r.depth_uncorrected_m, "seconds": r.seconds}  # fmt: skip
+               "depth_uncorrected_m": r.depth_uncorrected_m, "seconds": r.seconds}
         if z_true is not None and r.ok:
             row["rel_err"] = r.depth_m / z_true - 1
             row["rel_err_measured"] = r.depth_uncorrected_m / z_true - 1
@@ -116,7 +116,7 @@ def learn_and_apply(
     lr = learning.run(
         config, cs, cal, store, backend=backend,
         progress=None if progress is None else (lambda k, n, _id: progress("learning", k, n)),
-    )  # fmt: skip
+    )
     obs = (
         store.observations(context_id=lr.context_id)  # only this calibration's and config's
         if store is not None
@@ -126,7 +126,7 @@ def learn_and_apply(
     res = apply_all(
         config, cs, corrector,
         progress=None if progress is None else (lambda k, n: progress("application", k, n)),
-    )  # fmt: skip
+    )
     return lr, res
 
 
@@ -177,7 +177,7 @@ def run_bench(
     missing = [k for k in ("face", "verification") if k not in kinds]
     if missing:
         raise InputError(f"the bench needs 'face' and 'verification' captures; {cs.root} has no "
-                         f"{' or '.join(repr(k) for k in missing)} captures")  # fmt: skip
+                         f"{' or '.join(repr(k) for k in missing)} captures")
     det = CachedBackend(backend if backend is not None else default_backend())
     store = FixStore(store_path) if store_path is not None else None
     try:
@@ -192,7 +192,7 @@ def run_bench(
         "stages": {"naive": _stats_from_naive(naive), **_score(rows)},
         "learning": lr.to_dict(), "captures": rows,
         "per_distance": _per_distance(rows, naive),
-    }  # fmt: skip
+    }
     n_faces = max(len(lr.captures), 1)
     out["timing"] = {
         "learn_s_per_capture": round(lr.seconds / n_faces, 4),
@@ -207,7 +207,7 @@ def run_bench(
             sc = _score(_rows(cs, res_off))
             label = f"without {fix}" if getattr(cfg, fix) else f"with {fix}"
             table.append({"without": label, **sc["full"], "gated": sc["gated"],
-                          "within_sigma": sc["within_sigma"]})  # fmt: skip
+                          "within_sigma": sc["within_sigma"]})
         out["ablation"] = table
     obs_all = [o for c in lr.captures for o in c.observations]
     if lookups and obs_all:
@@ -217,7 +217,7 @@ def run_bench(
             res_l = apply_all(cfg_l, cs, Corrector(obs_all, cfg_l))
             sc = _score(_rows(cs, res_l))
             rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],
-                           "gated": sc["gated"]})  # fmt: skip
+                           "gated": sc["gated"]})
         out["lookups"] = rows_l
     out["seconds"] = round(time.perf_counter() - t0, 2)
     out["_observations"] = [o for c in lr.captures for o in c.observations]  # not JSON
@@ -241,7 +241,7 @@ def _per_distance(rows: list[dict[str, Any]], naive: dict[str, Any]) -> list[dic
             "measured": _stats([r["rel_err_measured"] for r in sel]),
             "full": _stats([r["rel_err"] for r in sel]),
             "cramer_rao_floor": _stats([r["crlb_rel"] for r in sel]),
-        })  # fmt: skip
+        })
     return out
 
 

@@ -194,7 +194,7 @@ def _figure(path: Path, rows: list[dict[str, Any]]) -> None:
     ax1.axhline(100 * MEDIAN_MAX, color="C0", ls=":", lw=0.8)
     ax1.axhline(100 * P90_MAX, color="C1", ls=":", lw=0.8)
     ax1.set(xlabel="tele/wide focal ratio", ylabel="|Z − Z_true| / Z_true (%)",
-            title="full flow per module", yscale="log")  # fmt: skip
+            title="full flow per module", yscale="log")
     ax1.legend(fontsize=8)
     seeds = [str(r["seed"]) for r in ok]
     ws = [np.nan if r["within_sigma"] is None else 100 * r["within_sigma"] for r in ok]
@@ -205,7 +205,7 @@ def _figure(path: Path, rows: list[dict[str, Any]]) -> None:
     ax3.bar(seeds, meas, color="C4")
     ax3.axhline(100 * MEASURED_MIN, color="k", ls=":", lw=0.8)
     ax3.set(ylabel="verification captures measured (%)", title="measured (rest gated)",
-            ylim=(0, 100))  # fmt: skip
+            ylim=(0, 100))
     for ax in (ax2, ax3):
         ax.tick_params(axis="x", labelrotation=90, labelsize=7)
     fig.tight_layout()
@@ -251,7 +251,7 @@ def run_module_bench(
     stamp_path = out / INPUTS_NAME
     if stamp_path.is_file() and json.loads(stamp_path.read_text()) != stamp:
         raise InputError(f"{out} holds a module bench with other ranges; use a new --out "
-                         "folder, or the same --ranges to resume it")  # fmt: skip
+                         "folder, or the same --ranges to resume it")
     out.mkdir(parents=True, exist_ok=True)
     stamp_path.write_text(json.dumps(stamp, indent=1) + "\n")
     tasks = {
@@ -259,7 +259,7 @@ def run_module_bench(
         for s in seeds
     }
     records, n_run = run_tasks(tasks, out / "modules", client=client, progress=progress,
-                               retry_failed=retry_failed, chunk=1)  # fmt: skip
+                               retry_failed=retry_failed, chunk=1)
     rows = []
     for key, rec in records.items():
         base = {"seed": int(key.split("-")[1]), "status": rec["status"], "reason": rec["reason"]}

@@ -132,7 +132,7 @@ def _fill_holes(P: F64, reach: int = 4) -> F64:
             [K[reach + k * di : reach + k * di + h, reach + k * dj : reach + k * dj + w]
              for k in range(1, reach + 1)],
             axis=0,
-        )  # fmt: skip
+        )
 
     hole = ~known & ((side(0, -1) & side(0, 1)) | (side(-1, 0) & side(1, 0)))
     out = P

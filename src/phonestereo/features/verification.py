@@ -156,7 +156,7 @@ def _fail(reason: str, stages: dict[str, Any], seconds: dict[str, float]) -> Cha
     return ChartDetection(
         False, reason, np.zeros((0, 2), np.int64), np.zeros((0, 2)), np.zeros(0), (), float("nan"),
         stages, seconds,
-    )  # fmt: skip
+    )
 
 
 def _circle_levels(pyr: list[F32], sigma: float, stages: dict[str, Any]) -> Iterator[Circles]:

@@ -125,7 +125,7 @@ class FocusScales:
         """
         out = []
         for cam, s, o in ((rig.wide, self.s_wide, self.offset_wide_px),
-                          (rig.tele, self.s_tele, self.offset_tele_px)):  # fmt: skip
+                          (rig.tele, self.s_tele, self.offset_tele_px)):
             c = np.array([cam.cx, cam.cy])
             if not (self.ok and np.isfinite(s)):
                 out.append(ScaleOffset.identity(c))
@@ -143,13 +143,13 @@ class FocusScales:
                 "offset_wide_px": [num(v) for v in self.offset_wide_px],
                 "offset_tele_px": [num(v) for v in self.offset_tele_px],
                 "condition": num(self.condition), "residual": num(self.residual),
-                "ok": self.ok, "reason": self.reason}  # fmt: skip
+                "ok": self.ok, "reason": self.reason}
 
 
 def _failed(variant: str, with_offset: bool, reason: str) -> FocusScales:
     nan = float("nan")
     return FocusScales(variant, with_offset, nan, nan, (nan, nan), (nan, nan), math.inf, nan,
-                       False, reason)  # fmt: skip
+                       False, reason)
 
 
 def corrected_essential(E_cur: Any, p: Any, f_wide_px: float, f_tele_px: float) -> Array:
@@ -218,7 +218,7 @@ def _result(variant: str, p: Array, cond: float, rms: float, with_offset: bool) 
     return FocusScales(
         variant, with_offset, math.exp(q[0] * 1e-3), math.exp(q[1] * 1e-3),
         (float(q[2]), float(q[3])), (float(q[4]), float(q[5])), cond, rms, ok, why,
-    )  # fmt: skip
+    )
 
 
 def _aligned(E: Array, E_ref: Array) -> Array:
@@ -278,7 +278,7 @@ def match_essential(
 def _pose_residual(
     E_cur: Array, p: Array, f: tuple[float, float], R_ref: Array, t_ref: Array,
     t_keep: Array | None,
-) -> Array:  # fmt: skip
+) -> Array:
     R, t = decompose_essential(corrected_essential(E_cur, p, *f), R_ref, t_ref)
     r = cv2.Rodrigues(np.asarray(R @ R_ref.T))[0].reshape(3)
     return r if t_keep is None else np.concatenate([r, t - t_keep])
@@ -287,7 +287,7 @@ def _pose_residual(
 def match_rotation(
     R_ref: Any, t_ref: Any, E_cur: Any, f_wide_px: float, f_tele_px: float,
     *, with_offset: bool = False,
-) -> FocusScales:  # fmt: skip
+) -> FocusScales:
     """Scales (and offsets) making the rotation of the corrected E′ equal R_ref (Fig. 3-26 "Om").
 
     Residuals: the rotation vector of R(p)·R_refᵀ (radians). ``t_ref`` only picks the
@@ -305,7 +305,7 @@ def match_rotation(
 def match_rotation_keep_translation(
     R_ref: Any, t_ref: Any, E_cur: Any, f_wide_px: float, f_tele_px: float,
     *, with_offset: bool = False,
-) -> FocusScales:  # fmt: skip
+) -> FocusScales:
     """Rotation to R_ref while the translation direction stays the uncorrected attempt's
     (Fig. 3-26 "OmT", after Figure 3-25). Residuals: rotation vector (rad) and Δt̂."""
     Rr, tr = as_matrix(R_ref, (3, 3), "R_ref"), np.asarray(t_ref, dtype=np.float64).reshape(3)

@@ -121,7 +121,7 @@ def essential_from_points(
     if len(xw) < MIN_POINTS:
         nan3 = np.full((3, 3), np.nan)
         return EssentialEstimate(nan3, nan3, np.full(3, np.nan), "none", np.nan, len(xw), False,
-                                 f"{len(xw)} matches; E needs >= {MIN_POINTS}")  # fmt: skip
+                                 f"{len(xw)} matches; E needs >= {MIN_POINTS}")
     H, _ = cv2.findHomography(xw, xt, 0)
     hx = np.c_[xw, np.ones(len(xw))] @ H.T
     rms = float(np.sqrt(np.mean(np.sum((hx[:, :2] / hx[:, 2:] - xt) ** 2, 1)))) * rig.tele.f
@@ -190,7 +190,7 @@ class VariantRow:
                 "p90_range_px": num(self.p90_range_px),
                 "median_condition": num(self.median_condition),
                 "attempts_ok": self.attempts_ok,
-                "per_attempt": [a.to_dict() for a in self.per_attempt]}  # fmt: skip
+                "per_attempt": [a.to_dict() for a in self.per_attempt]}
 
 
 @dataclass(frozen=True)
@@ -232,7 +232,7 @@ def shared_points(attempts: Sequence[StackAttempt]) -> tuple[np.ndarray, list[tu
 
 
 def _row(label: str, variant: str, ref: str, off: bool, res: list[FocusScales],
-         pts: list[tuple[Array, Array]], rig: Rig, rect: Rectification) -> VariantRow:  # fmt: skip
+         pts: list[tuple[Array, Array]], rig: Rig, rect: Rectification) -> VariantRow:
     d = np.full((len(pts), len(pts[0][0])), np.nan)
     for i, ((qw, qt), r) in enumerate(zip(pts, res, strict=True)):
         if r.ok:
@@ -245,7 +245,7 @@ def _row(label: str, variant: str, ref: str, off: bool, res: list[FocusScales],
     p90 = float(np.percentile(finite, 90)) if finite.size else math.nan
     conds = [r.condition for r in res if r.ok]
     return VariantRow(label, variant, ref, off, tuple(res), rng, med, p90,
-                      float(np.median(conds)) if conds else math.inf)  # fmt: skip
+                      float(np.median(conds)) if conds else math.inf)
 
 
 def _optimal(pts: list[tuple[Array, Array]], rig: Rig) -> list[FocusScales]:
@@ -264,7 +264,7 @@ def _optimal(pts: list[tuple[Array, Array]], rig: Rig) -> list[FocusScales]:
             tuple(float(v) for v in -cw.offset_px / cw.scale),  # type: ignore[arg-type]
             tuple(float(v) for v in -ct.offset_px / ct.scale),  # type: ignore[arg-type]
             1.0, max(cw.rms_px, ct.rms_px), ok, cw.reason or ct.reason,
-        ))  # fmt: skip
+        ))
     return out
 
 
@@ -322,7 +322,7 @@ def compare_variants(
     fw, ft = rig.wide.f, rig.tele.f
     cal_t = rig.T_tele_wide.t / np.linalg.norm(rig.T_tele_wide.t)
     refs = {"calib": (_unit(rig.essential()), rig.T_tele_wide.R, cal_t),
-            "focus": (est[0].E, est[0].R, est[0].t)}  # fmt: skip
+            "focus": (est[0].E, est[0].R, est[0].t)}
     ident = FocusScales("none", False, 1.0, 1.0, (0.0, 0.0), (0.0, 0.0), 1.0, 0.0)
     rows = [
         _row("none", "none", "-", False, [ident] * len(pts), pts, rig, rect),
@@ -344,12 +344,12 @@ def compare_variants(
                         res.append(match_rotation(R_ref, t_ref, e.E, fw, ft, with_offset=off))
                     else:
                         res.append(match_rotation_keep_translation(
-                            R_ref, t_ref, e.E, fw, ft, with_offset=off))  # fmt: skip
+                            R_ref, t_ref, e.E, fw, ft, with_offset=off))
                 label = f"{ref} {var}" + ("AndOffset" if off else "")
                 rows.append(_row(label, var, ref, off, res, pts, rig, rect))
     n = len(pts)
     rows.sort(key=lambda r: (not math.isfinite(r.median_range_px), r.attempts_ok < n,
-                             r.median_range_px))  # fmt: skip
+                             r.median_range_px))
     return VariantComparison(tuple(rows), tuple(est), keys)
 
 

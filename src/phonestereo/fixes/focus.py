@@ -127,7 +127,7 @@ class ScaleOffset:
             1.0 / s, -np.asarray(self.offset_px) / s, self.center_px,
             self.sigma_scale / s**2, np.asarray(self.sigma_offset_px) / s, self.rms_px, self.n,
             self.ok, self.reason,
-        )  # fmt: skip
+        )
 
     def then(self, other: ScaleOffset) -> ScaleOffset:
         """``other ∘ self`` (apply self, then other); both must share the centre."""
@@ -145,7 +145,7 @@ class ScaleOffset:
             "sigma_scale": float(self.sigma_scale),
             "sigma_offset_px": [float(v) for v in self.sigma_offset_px],
             "rms_px": float(self.rms_px), "n": int(self.n), "ok": self.ok, "reason": self.reason,
-        }  # fmt: skip
+        }
 
 
 def fit_scale_offset(
@@ -179,13 +179,13 @@ def fit_scale_offset(
         return ScaleOffset(
             1.0, np.zeros(2), c, np.inf, np.full(2, np.inf), float("nan"), len(a), False,
             f"{len(a)} point pairs; a scale/offset fit needs >= {MIN_POINTS}",
-        )  # fmt: skip
+        )
     u = a - c
     if float(np.sqrt(np.mean(np.sum((u - u.mean(0)) ** 2, axis=1)))) < 1.0:
         return ScaleOffset(
             1.0, np.zeros(2), c, np.inf, np.full(2, np.inf), float("nan"), len(a), False,
             "the points do not spread (< 1 px): no scale can be measured",
-        )  # fmt: skip
+        )
     n = len(a)
     A = np.zeros((2 * n, 3))
     A[:n, 0], A[n:, 0] = u[:, 0], u[:, 1]
@@ -227,7 +227,7 @@ def normalise_to_median(fits: Sequence[ScaleOffset]) -> list[ScaleOffset]:
         out.append(
             ScaleOffset(k, o_m - k * np.asarray(f.offset_px), c, f.sigma_scale * k / f.scale,
                         np.asarray(f.sigma_offset_px), f.rms_px, f.n)
-        )  # fmt: skip
+        )
     return out
 
 

@@ -201,7 +201,7 @@ def fit_drift_curve(t_s: Any, values: Any, *, saturation_fraction: float = 0.95)
         return DriftFit(
             False, f"no drift above the noise (|A| = {abs(a):.3g} < 3σ = {3 * sigma_n:.3g})",
             a, tau, c, sigma, tau_sig, a_sig, saturation_fraction, sat, n,
-        )  # fmt: skip
+        )
     note = ""
     if sat > float(t.max()):
         note = f"not saturated within the series (saturation at {sat:.0f} s > last {t.max():.0f} s)"

@@ -46,7 +46,7 @@ from phonestereo.io.manifest_fields import ORIENTATION_BUCKETS
 BUCKETS: tuple[str, ...] = ORIENTATION_BUCKETS
 _AXIS_ORDER = (1, 0, 2)  # ties broken in the order y, x, z
 _NAMES = {(1, 1): "landscape", (1, -1): "landscape-flipped", (0, 1): "portrait",
-          (0, -1): "portrait-flipped", (2, 1): "face-up", (2, -1): "face-down"}  # fmt: skip
+          (0, -1): "portrait-flipped", (2, 1): "face-up", (2, -1): "face-down"}
 
 
 def orientation_bucket(gravity: Any) -> str:
@@ -149,7 +149,7 @@ class BucketOffset:
 
         return {"bucket": self.bucket, "found": self.found, "reason": self.reason,
                 "offset_px": num(self.offset_px), "sigma_px": num(self.sigma_px),
-                "spread_px": num(self.spread_px), "n": self.n}  # fmt: skip
+                "spread_px": num(self.spread_px), "n": self.n}
 
 
 def _bucket_fit(bucket: str, r: np.ndarray) -> BucketOffset:
@@ -253,7 +253,7 @@ class OrientationOffsets:
         return BucketOffset(
             bucket, False, f"no offset learned in orientation {bucket!r} (known: {known})",
             nan, float("inf"), nan, 0,
-        )  # fmt: skip
+        )
 
     def offset(self, bucket: str) -> tuple[float, float]:
         """(offset_px, sigma_px) of a bucket.
@@ -301,7 +301,7 @@ class OrientationOffsets:
                             num(v["offset_px"], float("nan")), num(v["sigma_px"], float("inf")),
                             num(v["spread_px"], float("nan")), int(v["n"]))
             for k, v in data.items()
-        })  # fmt: skip
+        })
 
 
 __all__ = [

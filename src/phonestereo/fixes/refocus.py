@@ -101,7 +101,7 @@ class FocusVerdict:
         return {
             "sharpness": float(self.sharpness), "relative": float(self.relative),
             "failed": self.failed, "reason": self.reason,
-        }  # fmt: skip
+        }
 
 
 def detect_focus_failures(
@@ -135,7 +135,7 @@ def detect_focus_failures(
             if r < min_relative else "",
         )
         for v, r in zip(s, rel, strict=True)
-    ]  # fmt: skip
+    ]
 
 
 def cluster_disparities(
@@ -283,7 +283,7 @@ class FlatSceneScale:
             "r_ref_px": float(self.r_ref_px), "rms_h_px": float(self.rms_h_px),
             "rms_residual_px": float(self.rms_residual_px), "wt": self.wt.to_dict(),
             "inliers": int(self.inliers), "ok": self.ok, "reason": self.reason,
-        }  # fmt: skip
+        }
 
 
 def flat_scene_scale(
@@ -343,13 +343,13 @@ def flat_scene_scale(
         wt = fit_wt_scale(qw, qt, c)
         return FlatSceneScale(np.eye(3), np.zeros(degree), 1.0, np.nan, np.nan, wt, 0, False,
                               f"{len(qw)} matches; the flat-scene method needs >= "
-                              f"{max(MIN_POINTS, degree + 5)}")  # fmt: skip
+                              f"{max(MIN_POINTS, degree + 5)}")
     H, mask = cv2.findHomography(qt, qw, cv2.RANSAC, ransac_px)
     if H is None:
         wt = fit_wt_scale(qw, qt, c)
         return FlatSceneScale(np.eye(3), np.zeros(degree), 1.0, np.nan, np.nan, wt, 0, False,
                               "no homography between the tele and wide points (not a flat "
-                              "scene, or degenerate points)")  # fmt: skip
+                              "scene, or degenerate points)")
     inl = mask.reshape(-1).astype(bool)
     u = qt - c
     r_ref = float(np.max(np.linalg.norm(u, axis=1))) or 1.0
@@ -374,7 +374,7 @@ def flat_scene_scale(
     return FlatSceneScale(
         np.asarray(H, dtype=np.float64), np.asarray(coeffs), r_ref, rms_h, rms_res, wt,
         int(inl.sum()), wt.ok, wt.reason,
-    )  # fmt: skip
+    )
 
 
 __all__ = [

@@ -84,7 +84,7 @@ class WTScale:
             "sigma_scale": float(self.sigma_scale), "sigma_offset_px": float(self.sigma_offset_px),
             "rms_e_px": float(self.rms_e_px), "rms_e_before_px": float(self.rms_e_before_px),
             "n": int(self.n), "ok": self.ok, "reason": self.reason,
-        }  # fmt: skip
+        }
 
 
 def _fit_wt(qw: Array, qt: Array, c: Array, w: Array, f_scale: float, min_spread: float) -> WTScale:
@@ -93,12 +93,12 @@ def _fit_wt(qw: Array, qt: Array, c: Array, w: Array, f_scale: float, min_spread
     before = float(np.sqrt(np.mean((e0 - e0.mean()) ** 2))) if n else float("nan")
     if n < MIN_POINTS:
         return WTScale(1.0, 0.0, c, np.inf, np.inf, float("nan"), before, n, False,
-                       f"{n} matches; the W-T scale needs >= {MIN_POINTS}")  # fmt: skip
+                       f"{n} matches; the W-T scale needs >= {MIN_POINTS}")
     u = qt[:, 1] - c[1]
     if float(np.std(u)) < min_spread:
         return WTScale(1.0, float(np.median(e0)), c, np.inf, np.inf, before, before, n, False,
                        f"the matches span {np.std(u):.1f} px (std) across the disparity axis; "
-                       f"the W-T scale needs >= {min_spread} px")  # fmt: skip
+                       f"the W-T scale needs >= {min_spread} px")
     A = np.column_stack([u, np.ones(n)]) * w[:, None]
     rhs = (qw[:, 1] - c[1]) * w
     p, sig, _, r = _robust_linear(A, rhs, f_scale)

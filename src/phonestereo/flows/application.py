@@ -103,7 +103,7 @@ class DepthResult:
             "depth_uncorrected_m": num(self.depth_uncorrected_m),
             "gates": [g.to_dict() for g in self.gates], "stages": self.stages,
             "seconds": round(self.seconds, 4),
-        }  # fmt: skip
+        }
 
 
 def _gated(cid: str, gate: str, reason: str, gates: list[Gate], **kw: Any) -> DepthResult:
@@ -166,12 +166,12 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         c, parts = inputs.corrector.correct_parts(np.column_stack([grid, d_grid]), orientation)
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
-                          stages=stages, seconds=time.perf_counter() - t0)  # fmt: skip
+                          stages=stages, seconds=time.perf_counter() - t0)
         corr_v, corr_s = c.value_px, c.sigma_px
         stages["correction"] = {
             "strategy": c.strategy, "median_px": round(float(np.median(corr_v)), 5),
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
-        }  # fmt: skip
+        }
     d_fix = d_grid + corr_v
     z = ref.backproject(grid, d_fix)[:, 2]
     k = int(np.argsort(z)[len(z) // 2])  # the median grid point
@@ -186,12 +186,12 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
         "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),
         **{f"correction_{n}": round(float(v[k]), 5) for n, v in parts.items()},
-    }  # fmt: skip
+    }
     if not sigma_z <= config.max_relative_sigma * depth:
         ext = inputs.corrector.extents.get(inputs.corrector.bucket(orientation)) if (
-            inputs.corrector is not None) else None  # fmt: skip
+            inputs.corrector is not None) else None
         learned = "" if ext is None else (
-            f"; learned disparities {ext.d_lo_px:.1f}–{ext.d_hi_px:.1f} px")  # fmt: skip
+            f"; learned disparities {ext.d_lo_px:.1f}–{ext.d_hi_px:.1f} px")
         return _gated(
             entry.id, "extrapolation",
             f"depth {depth:.3f} m would carry "
@@ -200,12 +200,12 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             f"learned (disparity {float(d_grid[k]):.1f} px"
             f"{learned}); learn from faces at this distance and sensor position",
             gates, stages=stages, seconds=time.perf_counter() - t0,
-        )  # fmt: skip
+        )
     return DepthResult(
         entry.id, True, depth, sigma_z, "", "",
         float(np.median(d_grid)), float(np.median(d_fix)), float(np.median(corr_v)),
         float(np.median(z_raw)), stages, tuple(gates), time.perf_counter() - t0,
-    )  # fmt: skip
+    )
 
 
 __all__ = ["ApplicationInputs", "DepthResult", "run"]

@@ -254,7 +254,7 @@ class Corrector:
             ext.extra_sigma_px(query, c.value_px) if ext is not None else (np.zeros(n),) * 2
         )
         parts = {"fit": fit, "capture": np.full(n, self.capture_sigma_px),
-                 "systematic": sys_px, "extrapolation": ext_px}  # fmt: skip
+                 "systematic": sys_px, "extrapolation": ext_px}
         sigma = np.sqrt(sum(v**2 for v in parts.values()))
         return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason), parts
 

@@ -52,7 +52,7 @@ class FocusCorrection:
         ~3 px disparity error). The scale is the focus effect.
         """
         return Rig(self._camera(rig.wide, self.wide), self._camera(rig.tele, self.tele),
-                   rig.T_tele_wide)  # fmt: skip
+                   rig.T_tele_wide)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""

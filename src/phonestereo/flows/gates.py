@@ -55,7 +55,7 @@ def fixed_focus_gate(entry: CaptureEntry) -> Gate:
         return Gate(
             "fixed-focus", False,
             "autofocus capture: the lens may sit anywhere (§3.5.2); lock a manual focus",
-        )  # fmt: skip
+        )
     if entry.focus_mode != "manual":
         return Gate(
             "fixed-focus",
@@ -72,7 +72,7 @@ def orientation_gate(entry: CaptureEntry) -> Gate:
         return Gate(
             "orientation", False,
             "no gravity vector or orientation label: the orientation bucket is unknown (§3.4)",
-        )  # fmt: skip
+        )
     return Gate("orientation", True)
 
 
@@ -84,7 +84,7 @@ def learned_gate(n_observations: int, min_observations: int, bucket: str) -> Gat
             f"{n_observations} learned observations in orientation bucket '{bucket}' (< "
             f"{min_observations}); run `phonestereo learn` on face captures in this "
             "orientation first",
-        )  # fmt: skip
+        )
     return Gate("learned", True)
 
 

@@ -119,7 +119,7 @@ class CaptureLearning:
             "capture_id": self.capture_id, "n_observations": len(self.observations),
             "gate": self.gate, "reason": self.reason, "stages": self.stages,
             "gates": [g.to_dict() for g in self.gates], "seconds": round(self.seconds, 4),
-        }  # fmt: skip
+        }
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ class LearningResult:
             "set_fingerprint": self.set_fingerprint,
             "skipped": [{"capture_id": c.capture_id, "gate": c.gate, "reason": c.reason}
                         for c in self.captures if not c.ok],
-        }  # fmt: skip
+        }
 
 
 def _faces_box(
@@ -209,7 +209,7 @@ def learn_face_capture(
     obs = res.observations
     if not obs:
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
-                               time.perf_counter() - t0)  # fmt: skip
+                               time.perf_counter() - t0)
     if config.wt_scale:
         box = _faces_box(rect, obs, rig.wide.size)
         wt = None
@@ -223,7 +223,7 @@ def learn_face_capture(
         if wt is None or not wt.ok:
             # Unscaled observations would teach the field the breathing of this one attempt.
             return CaptureLearning(entry.id, (), "wt-scale", f"no W-T scale: {why}", stages,
-                                   tuple(gates), time.perf_counter() - t0)  # fmt: skip
+                                   tuple(gates), time.perf_counter() - t0)
         obs = tuple(
             replace(o, d_measured_px=float(wt.correct_disparity(o.x_px, o.d_measured_px)))
             for o in obs

@@ -157,7 +157,7 @@ def tele_view_box(ref: Rectification, margin_px: int = 40) -> tuple[int, int, in
         np.column_stack([np.linspace(0, w - 1, 32), np.full(32, h - 1.0)]),
         np.column_stack([np.zeros(32), np.linspace(0, h - 1, 32)]),
         np.column_stack([np.full(32, w - 1.0), np.linspace(0, h - 1, 32)]),
-    ])  # fmt: skip
+    ])
     raw = ref.unrectify_wide(edge)
     raw = raw[np.isfinite(raw).all(axis=1)]
     lo = np.maximum(raw.min(axis=0) + margin_px, 0)
@@ -177,7 +177,7 @@ def _fail(reason: str, grid: F64, counts: dict[str, int], wt: WTScale | None = N
     return RoiMeasurement(
         False, reason, np.zeros((0, 2)), z, z, z, np.zeros(0, bool), float("nan"), None, wt,
         grid, counts,
-    )  # fmt: skip
+    )
 
 
 def _match_majority(
@@ -198,7 +198,7 @@ def _match_majority(
     lo_d = int(np.floor(d0)) - cfg.fine_range_px
     hi_d = int(np.ceil(d0)) + cfg.fine_range_px
     res = match_rectified(left, right, max_disparity=hi_d, min_disparity=lo_d, roi=box,
-                          config=mcfg)  # fmt: skip
+                          config=mcfg)
     counts["matches"] = len(res.d)
     in_roi = np.all((res.xy >= slo) & (res.xy <= shi), axis=1)
     counts["in_roi"] = int(in_roi.sum())
@@ -206,7 +206,7 @@ def _match_majority(
     if counts["in_roi"] < 3:
         return res, in_roi, empty, float("nan"), counts
     kw = {"bin_px": cfg.majority_bin_px, "tol_px": cfg.majority_tol_px,
-          "tol_rel": cfg.majority_tol_rel}  # fmt: skip
+          "tol_rel": cfg.majority_tol_rel}
     m1, _ = majority(res.d[in_roi], **kw)
     tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
     keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
@@ -293,7 +293,7 @@ def measure_roi(
     inner = inscribed_box(
         win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
         win.wide_rect.size,
-    )  # fmt: skip
+    )
     cboxes = [b for b in (inner, bbox) if b is not None]
     if inner == bbox:
         cboxes = [bbox]
@@ -315,13 +315,13 @@ def measure_roi(
             f"the ROI does not correlate with the tele (ZNCC {peak:.2f} < "
             f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view",
             grid, counts,
-        )  # fmt: skip
+        )
     if second >= cfg.max_ambiguity * peak:
         return _fail(
             f"ambiguous disparity: two correlation peaks ({peak:.3f}, {second:.3f}) — a "
             "repetitive texture without context; enlarge the ROI or aim at a distinct object",
             grid, counts,
-        )  # fmt: skip
+        )
     counts["coarse_e_px"] = int(e0)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
@@ -368,7 +368,7 @@ def measure_roi(
     return RoiMeasurement(
         True, "", xy[good], d[good], e[good], sd[good], in_roi[idx][good], m2, plane, wt, grid,
         counts,
-    )  # fmt: skip
+    )
 
 
 __all__ = [

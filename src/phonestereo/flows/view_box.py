@@ -26,7 +26,7 @@ def outline(box: tuple[int, int, int, int], n: int = 8) -> F64:
         np.column_stack([np.full(n, x1), y + t * (y1 - y)]),
         np.column_stack([x1 - t * (x1 - x), np.full(n, y1)]),
         np.column_stack([np.full(n, x), y1 - t * (y1 - y)]),
-    ])  # fmt: skip
+    ])
 
 
 def tele_outline(rect: Rectification, n: int = 16) -> F64:
@@ -88,7 +88,7 @@ def inscribed_box(
     if np.any(hi - lo < 8):
         return None
     polys = [outline, tele_poly + np.array([d_range[0], 0.0]),
-             tele_poly + np.array([d_range[1], 0.0])]  # fmt: skip
+             tele_poly + np.array([d_range[1], 0.0])]
     # The valid region (convex: an intersection of convex outlines) sampled on a grid; its
     # centroid and extent start the search.
     g = _outline_grid(lo, hi, 25)
@@ -100,7 +100,7 @@ def inscribed_box(
 
     def corners(half: F64) -> F64:
         return np.array([c - half, [c[0] + half[0], c[1] - half[1]], c + half,
-                         [c[0] - half[0], c[1] + half[1]]])  # fmt: skip
+                         [c[0] - half[0], c[1] + half[1]]])
 
     def fits(half: F64) -> bool:
         q = corners(half)

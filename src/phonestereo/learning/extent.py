@@ -118,7 +118,7 @@ class LearnedExtent:
         return cls(
             float(lo), float(hi), rho, float(rho_c),
             gain_sigma, float(cap), reach, g, cKDTree(xy) if len(xy) else None,
-        )  # fmt: skip
+        )
 
     def outside_px(self, d: Any) -> np.ndarray:
         """How far disparities lie outside the learned range, px (0 inside)."""
@@ -145,7 +145,7 @@ class LearnedExtent:
             "rho": round(self.rho, 6), "rho_captures": round(self.rho_captures, 6),
             "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
             "capture_sigma_px": round(self.capture_sigma_px, 5), "n_captures": self.n_captures,
-        }  # fmt: skip
+        }
 
 
 def _robust_sd(v: np.ndarray) -> float:

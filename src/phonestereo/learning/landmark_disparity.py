@@ -284,7 +284,7 @@ def _eye_windows(img: _Rectified, pupils: F64, d0: float, e0: float) -> _EyeWind
     s = ncc_search(
         img.left, img.right, xy, radius=r, min_d=lo, max_d=hi,
         row_tolerance=int(np.ceil(abs(e0))) + 2, lr_min_score=np.inf,
-    )  # fmt: skip
+    )
     ok = s.searched & ~s.at_edge & np.isfinite(s.d0)
     if not ok.any():
         return None
@@ -311,7 +311,7 @@ def _refine_faces(
             img.left, img.left_coef, img.right_coef,
             np.concatenate([w.xy for w in group]), np.concatenate([w.d0 for w in group]),
             np.concatenate([w.e0 for w in group]), radius=r, slant=False,
-        )  # fmt: skip
+        )
         sd, _, _ = match_sigma(
             ref.cov_unit, ref.residual_var, ref.gain, img.sigma_left, img.sigma_right
         )
@@ -421,7 +421,7 @@ def landmark_disparity(
             continue
         assert img is not None
         start, why = search_start(rect, img.left, img.right, pw[i], float(d_exp[i]),
-                                  d_tol_px, d_tol_rel, max_e_px)  # fmt: skip
+                                  d_tol_px, d_tol_rel, max_e_px)
         if start is None:
             unmatched.append((i, tele_why + why))
         else:

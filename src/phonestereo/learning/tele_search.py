@@ -54,7 +54,7 @@ def search_start(
         left, right, xy, radius=r, min_d=int(np.floor(d_expected - tol)),
         max_d=int(np.ceil(d_expected + tol)), row_tolerance=int(np.ceil(max_e_px)),
         lr_min_score=np.inf,
-    )  # fmt: skip
+    )
     ok = s.searched & ~s.at_edge & np.isfinite(s.d0) & (s.score >= min_score)
     if not ok.all():
         return None, (

@@ -25,7 +25,7 @@ from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 
 STAGES = (("naive", "naive Z = f·B/d"), ("measured", "fixes, no learned correction"),
-          ("full", "full flow"), ("cramer_rao_floor", "matching σ (Cramér–Rao)"))  # fmt: skip
+          ("full", "full flow"), ("cramer_rao_floor", "matching σ (Cramér–Rao)"))
 
 
 def _png(fig: Figure) -> str:
@@ -43,9 +43,9 @@ def error_vs_distance_figure(bench: dict[str, Any]) -> Figure:
     x = np.array([r["distance_m"] for r in rows])
     for key, label in STAGES:
         med = np.array([np.nan if not r.get(key) or r[key]["median_rel_err"] is None
-                        else 100 * r[key]["median_rel_err"] for r in rows])  # fmt: skip
+                        else 100 * r[key]["median_rel_err"] for r in rows])
         p90 = np.array([np.nan if not r.get(key) or r[key]["p90_rel_err"] is None
-                        else 100 * r[key]["p90_rel_err"] for r in rows])  # fmt: skip
+                        else 100 * r[key]["p90_rel_err"] for r in rows])
         style = "--" if key == "cramer_rao_floor" else "-"
         line = ax.plot(x, med, style, marker="o", label=label)[0]
         ax.vlines(x, med, p90, color=line.get_color(), alpha=0.4)

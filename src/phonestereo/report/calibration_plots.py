@@ -96,7 +96,7 @@ def residual_figure(result: CalibrationResult, camera: int = 0) -> Figure:
             q[mask, 0], q[mask, 1], shown[mask, 0], shown[mask, 1],
             color=color, angles="xy", scale_units="xy", scale=1.0 / gain, width=0.0022,
             label=f"{label} ({int(mask.sum())})",
-        )  # fmt: skip
+        )
     key = _nice(typical)
     if ax_q.collections:
         ax_q.quiverkey(
@@ -123,7 +123,7 @@ def residual_figure(result: CalibrationResult, camera: int = 0) -> Figure:
         ax_r.scatter(
             radius[far], np.full(int(far.sum()), top), s=30, color=OUTLIER_COLOR, marker="^",
             clip_on=False, label=f"outliers beyond {top:.2g} px",
-        )  # fmt: skip
+        )
     if inl.sum() >= 2:
         edges = np.linspace(0.0, float(radius.max()) * 1.0001, 13)
         which = np.digitize(radius[inl], edges) - 1

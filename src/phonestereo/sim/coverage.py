@@ -144,10 +144,10 @@ def plan_notes(
     notes, (lo, hi) = [], range_m
     if planned != tuple(asked):
         notes.append(f"{what} planned at {_span(planned)} instead of {_span(asked)}: "
-                     f"{module.name} sees it from {lo:.2f} m to {hi:.2f} m")  # fmt: skip
+                     f"{module.name} sees it from {lo:.2f} m to {hi:.2f} m")
     if lo > hi:
         notes.append(f"cannot cover {what}: it needs >= {lo:.2f} m for the tele and <= "
-                     f"{hi:.2f} m for the wide; planned at {_span(planned)} anyway")  # fmt: skip
+                     f"{hi:.2f} m for the wide; planned at {_span(planned)} anyway")
     else:
         if min(asked) < lo:
             notes.append(f"cannot cover {what} nearer than {lo:.2f} m (the tele's field)")
@@ -162,7 +162,7 @@ def plan_notes(
         worst = float(np.max(tele_blur_px(module, focus_m, planned)))
         notes.append(f"{what}: one manual focus at {focus_m:g} m would blur the tele by up to "
                      f"{worst:.0f} px (> {BLUR_BUDGET_PX:g}); each stack is focused on its "
-                     "chart instead")  # fmt: skip
+                     "chart instead")
     return notes
 
 
@@ -191,5 +191,5 @@ def fit_config(config: Any, module: ModuleSpec, what: str, notes: list[str]) -> 
     focus_m, per_distance = fit_focus(module, planned, config.focus_m)
     per_distance = per_distance or config.focus_per_distance
     notes += plan_notes(what, module, tuple(config.distances_m), planned, range_m, focus_m,
-                        per_distance and not config.focus_per_distance, config.focus_m)  # fmt: skip
+                        per_distance and not config.focus_per_distance, config.focus_m)
     return replace(config, distances_m=planned, focus_m=focus_m, focus_per_distance=per_distance)

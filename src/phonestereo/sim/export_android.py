@@ -80,7 +80,7 @@ def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], 
         "first_frame_timestamp_ns": FIRST_FRAME_NS,
         "cameras": {IDS["tele"]: _characteristics(cal, "tele"),
                     IDS["wide"]: _characteristics(cal, "wide")},
-    }  # fmt: skip
+    }
     captures = {}
     for c in manifest.captures:
         if c.gravity is None:

@@ -141,7 +141,7 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
             "gravity": [float(v) for v in g], "focus_group": c.focus_group,
             "focus_attempt": c.focus_attempt, "temperature_c": c.temperature_c,
             "roi": list(c.roi) if c.roi is not None else None, "cameras": cams,
-        }  # fmt: skip
+        }
         captures[f"{c.id}.json"] = {k: v for k, v in doc.items() if v is not None}
     return session, captures
 

@@ -160,7 +160,7 @@ class Planner:
         cal = factory_calibration(self.module, stream(self.seed, STREAM_CALIBRATION))
         caps = tuple(self.captures)
         return Plan(self.scenario, self.module, self.seed, cal, caps, self.description,
-                    tuple(self.notes))  # fmt: skip
+                    tuple(self.notes))
 
 
 def chart_roi(

@@ -103,7 +103,7 @@ class ModuleRanges(BaseModel):
                 lo, hi = value
                 if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
                     raise InputError(f"range {name} must be [low, high] with low <= high, "
-                                     f"got {list(value)}")  # fmt: skip
+                                     f"got {list(value)}")
         if self.width_px[0] < 64:
             raise PhysicsError(f"width_px {list(self.width_px)} is too small for a camera")
         if self.pixel_pitch_um[0] <= 0 or self.focal_ratio[0] < 1:
@@ -128,7 +128,7 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
             raise InputError(f"cannot read --ranges file {p}: {exc}") from None
         except json.JSONDecodeError as exc:
             raise InputError(f"--ranges file {p} is not valid JSON: {exc.msg} at line "
-                             f"{exc.lineno}") from None  # fmt: skip
+                             f"{exc.lineno}") from None
         if not isinstance(user, dict):
             raise InputError(f"--ranges file {p} must hold a JSON object of ranges")
         base.update(user)
@@ -166,11 +166,11 @@ def _draw_optics(rng: np.random.Generator, r: ModuleRanges) -> dict[str, Any] | 
     n_t = max(_u(rng, r.tele_f_number), f_t_mm / r.tele_max_aperture_mm)
     return {"size": (width, height), "ratio": ratio,
             "wide": (round(f_w_mm, 4), round(pitch_w, 4), round(_u(rng, r.wide_f_number), 2)),
-            "tele": (round(f_t_mm, 4), round(pitch_t, 4), round(n_t, 2))}  # fmt: skip
+            "tele": (round(f_t_mm, 4), round(pitch_t, 4), round(n_t, 2))}
 
 
 def _camera(base: dict[str, Any], optics: tuple[float, float, float], size: tuple[int, int],
-            rng: np.random.Generator, r: ModuleRanges, sag: Pair) -> dict[str, Any]:  # fmt: skip
+            rng: np.random.Generator, r: ModuleRanges, sag: Pair) -> dict[str, Any]:
     f_mm, pitch, n = optics
     k = _u(rng, r.distortion_scale)
     drift, angle = _u(rng, r.heating_drift_px), rng.uniform(0, 2 * np.pi)
@@ -187,7 +187,7 @@ def _camera(base: dict[str, Any], optics: tuple[float, float, float], size: tupl
         sag_px_per_g=round(_u(rng, sag), 3),
         sensor={**base["sensor"], "full_well_e": round(_u(rng, r.full_well_e)),
                 "read_noise_e": round(_u(rng, r.read_noise_e), 2)},
-    )  # fmt: skip
+    )
     return cam
 
 
@@ -251,7 +251,7 @@ def random_module(seed: int, ranges: ModuleRanges | None = None) -> ModuleSpec:
         "handheld": {"rotation_deg": round(_u(rng, r.handheld_rotation_deg), 3),
                      "translation_mm": round(_u(rng, r.handheld_translation_mm), 3)},
         "reports": {**base["reports"], "temperature": temperature},
-    }  # fmt: skip
+    }
     data["description"] = _describe(data, optics["ratio"], k)
     return parse_module(data, f"random module (seed {seed})")
 

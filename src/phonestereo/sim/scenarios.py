@@ -182,7 +182,7 @@ class BenchConfig:
 def _conditions(
     cid: str, kind: Any, t: float, pose: Any, handheld: bool, cfg: Any, group: Any, k: Any,
     focus_m: float | None = None,
-) -> CaptureConditions:  # fmt: skip
+) -> CaptureConditions:
     mode: Literal["manual", "auto"] = getattr(cfg, "focus_mode", "manual")
     focus = cfg.focus_m if focus_m is None else focus_m
     return CaptureConditions(cid, kind, t, pose, handheld, mode, focus, group, k)
@@ -288,7 +288,7 @@ def _plan_verification(p: Planner, module: ModuleSpec, cfg: VerificationConfig, 
         scene = _verification_scene(module, d, tilt)
         focus = d if cfg.focus_per_distance else None
         t = _stack(p, scene, cfg, f"V{i:02d}", t, handheld=cfg.handheld, roi=cfg.roi_px,
-                   roi_jitter=cfg.roi_jitter, focus_m=focus)  # fmt: skip
+                   roi_jitter=cfg.roi_jitter, focus_m=focus)
     return t
 
 

@@ -95,7 +95,7 @@ def write_capture_set(
         (plan.module, pc.state, pc.scene, plan.seed, plan.scenario, pc.index,
          str(folder / entry.wide), str(folder / entry.tele))
         for pc, entry in zip(plan.captures, manifest.captures, strict=True)
-    ]  # fmt: skip
+    ]
     if render:
         files += [f for entry in manifest.captures for f in (entry.wide, entry.tele)]
     if render and workers > 1:

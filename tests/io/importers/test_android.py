@@ -34,7 +34,7 @@ def _pixel_characteristics() -> AndroidCharacteristics:
     chars = {f"android.{k}": v for k, v in src.items() if k in (
         "lens.intrinsicCalibration", "lens.distortion", "lens.poseRotation",
         "lens.poseTranslation", "lens.poseReference", "sensor.orientation", "lens.facing",
-        "lens.info.minimumFocusDistance")}  # fmt: skip
+        "lens.info.minimumFocusDistance")}
     # Not in the source file: the array size. The Pixel main sensor is 4032×3024 (12.2 MP);
     # its printed c_x, c_y = 2019.8, 1542.3 sit 4 and 30 px from that array's centre.
     chars["android.sensor.info.activeArraySize"] = [0, 0, 4032, 3024]
@@ -46,7 +46,7 @@ def _pixel_characteristics() -> AndroidCharacteristics:
 def test_real_pixel_camera2_vector_imports_under_the_documented_conventions() -> None:
     chars = _pixel_characteristics()
     res = AndroidResult.model_validate({"image": "x.jpg", "android.sensor.timestamp": 0,
-                                        "android.control.afMode": 1})  # fmt: skip
+                                        "android.control.afMode": 1})
     full = output_camera(chars, res, (4032, 3024), "pixel", "0")
     # Hand-derived: f unchanged at full size; c − 0.5 (Android: pixel centre at x + 0.5).
     assert full.fx == pytest.approx(2775.4246, abs=1e-4)  # float32 print: 8 digits
@@ -71,7 +71,7 @@ def test_quaternion_formula_matches_scipy() -> None:
 
     q = Rotation.from_rotvec([0.3, -0.2, 0.9]).as_quat()  # scipy: (x, y, z, w)
     np.testing.assert_allclose(quaternion_to_matrix(q), Rotation.from_quat(q).as_matrix(),
-                               atol=1e-15)  # fmt: skip
+                               atol=1e-15)
 
 
 # Accelerometer at rest reads +9.81 m/s² *up* in the Android device frame (x right, y to
@@ -112,9 +112,9 @@ def test_round_trip_reproduces_calibration_and_manifest(sim_set: Path, tmp_path:
     for a, b in zip(native.captures(), got.captures(), strict=True):
         assert abs(a.time_s - b.time_s) <= 1e-9
         assert (a.focus_mode, a.focus_position, a.kind, a.roi) == (
-            b.focus_mode, b.focus_position, b.kind, b.roi)  # fmt: skip
+            b.focus_mode, b.focus_position, b.kind, b.roi)
         assert (a.focus_group, a.focus_attempt, a.temperature_c) == (
-            b.focus_group, b.focus_attempt, b.temperature_c)  # fmt: skip
+            b.focus_group, b.focus_attempt, b.temperature_c)
         assert capture_bucket(a.gravity, a.orientation) == capture_bucket(b.gravity, b.orientation)
         assert np.abs(np.subtract(a.gravity, b.gravity)).max() <= 2e-9  # 9 printed digits
 
@@ -129,12 +129,12 @@ def test_distortion_corrected_stream_is_pinhole_in_active_array_pixels() -> None
         "android.sensor.info.activeArraySize": [8, 6, 3992, 2994],
         "android.sensor.info.preCorrectionActiveArraySize": [0, 0, 4000, 3000],
         "android.sensor.orientation": 90,
-    })  # fmt: skip
+    })
     res = AndroidResult.model_validate({
         "image": "x.png", "android.sensor.timestamp": 0, "android.control.afMode": 0,
         "android.distortionCorrection.mode": 2,
         "android.scaler.cropRegion": [0, 0, 3984, 2988],  # active-array coordinates
-    })  # fmt: skip
+    })
     cam = output_camera(chars, res, (1992, 1494), "t", "0")
     assert cam.lens.is_identity()  # the ISP removed the distortion
     # Intrinsics are pre-correction pixels; the active array starts at (8, 6) of them:

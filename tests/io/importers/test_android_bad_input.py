@@ -68,7 +68,7 @@ CASES = [
      r"key 'image'.*neither the active array.*cropRegion"),
     ("no accelerometer and no label", _no_gravity, r"'accelerometer'.*required"),
     ("missing CaptureResult key", _no_af_mode, r"android\.control\.afMode.*required key"),
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize(("name", "edit", "match"), CASES, ids=[c[0] for c in CASES])
@@ -109,7 +109,7 @@ def test_cli_gives_exit_2_with_the_key_and_json_on_success(good_dump: Path, tmp_
     r = CliRunner().invoke(app, ["import", "android", str(dump), "--out", str(tmp_path / "bad")])
     assert r.exit_code == 2 and "poseReference" in r.output and "AUTOMOTIVE" in r.output
     r = CliRunner().invoke(app, ["import", "android", str(good_dump), "--out",
-                                 str(tmp_path / "set"), "--json"])  # fmt: skip
+                                 str(tmp_path / "set"), "--json"])
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     assert out["captures"] == 4 and out["cameras"] == {"wide": "2", "tele": "4"}

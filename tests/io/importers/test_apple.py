@@ -27,7 +27,7 @@ from phonestereo.sim.export_apple import lut_for_camera, write_apple_dump
 IPHONE_COLUMNS = [0.9999968, 0.000815, -0.002396,
                   -0.000826, 0.9999896, -0.004481,
                   0.002392, 0.004483, 0.999987,
-                  -14.278, 0.0, -0.336]  # fmt: skip
+                  -14.278, 0.0, -0.336]
 
 
 def test_real_iphone_extrinsic_vector_gives_R_and_t_in_metres() -> None:
@@ -123,7 +123,7 @@ CASES: list[tuple[str, Edit, str]] = [
     ("reference size of another aspect", lambda s, c: _cam(s).__setitem__(
         "intrinsicMatrixReferenceDimensions", {"width": 4000.0, "height": 2250.0}),
      r"key 'image'.*aspect ratio.*intrinsicMatrixReferenceDimensions"),
-]  # fmt: skip
+]
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ T0 = dt.datetime(2026, 3, 1, 10, 0, 0)
 
 
 def _jpeg(path: Path, size: tuple[int, int], when: dt.datetime | None, focal: float,
-          orientation: int | None = 6, distance: float | None = None) -> None:  # fmt: skip
+          orientation: int | None = 6, distance: float | None = None) -> None:
     exif = Image.Exif()
     if orientation is not None:
         exif[0x0112] = orientation
@@ -53,7 +53,7 @@ def shots(tmp_path: Path) -> Path:
 def _import(d: Path, **kw: object) -> object:
     args = {"kind": "scene", "focus_mode": "auto", "time_offset_s": 200.0, **kw}
     return import_exif(str(d / "wide_*.jpg"), str(d / "tele_*.jpg"), d / "calibration.json",
-                       d / "set", **args)  # type: ignore[arg-type]  # fmt: skip
+                       d / "set", **args)  # type: ignore[arg-type]
 
 
 def test_pairs_by_capture_time_and_maps_exif_fields(shots: Path) -> None:
@@ -87,7 +87,7 @@ def test_swapped_globs_and_wrong_sizes_are_refused(shots: Path) -> None:
     with pytest.raises(InputError, match="swap the two globs"):
         import_exif(str(shots / "tele_*.jpg"), str(shots / "wide_*.jpg"),
                     shots / "calibration.json", shots / "set", kind="scene",
-                    focus_mode="auto", time_offset_s=0.0)  # fmt: skip
+                    focus_mode="auto", time_offset_s=0.0)
     _jpeg(shots / "tele_2.jpg", (48, 64), T0 + dt.timedelta(seconds=20), 12.6)
     with pytest.raises(InputError, match=r"stored size 48×64.*calibration's tele size"):
         _import(shots)
@@ -96,7 +96,7 @@ def test_swapped_globs_and_wrong_sizes_are_refused(shots: Path) -> None:
 def test_cli_asks_for_what_exif_lacks(shots: Path) -> None:
     base = ["import", "exif", str(shots / "wide_*.jpg"), str(shots / "tele_*.jpg"),
             "--calibration", str(shots / "calibration.json"), "--out", str(shots / "set"),
-            "--kind", "scene", "--time-offset-s", "0"]  # fmt: skip
+            "--kind", "scene", "--time-offset-s", "0"]
     r = CliRunner().invoke(app, base)
     assert r.exit_code == 2 and "--focus-mode" in r.output
     r = CliRunner().invoke(app, [*base, "--focus-mode", "auto", "--json"])

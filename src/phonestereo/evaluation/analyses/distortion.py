@@ -84,13 +84,13 @@ def _calibration_compare(cs: CaptureSet) -> dict[str, Any] | None:
             views.append(BoardView(obj[det.ids], det.points, det.ids))
     if len(views) < 3:
         return {"ok": False, "reason": f"a {BOARD[0]}x{BOARD[1]} board found in {len(views)} "
-                f"of {len(caps)} calibration captures; >= 3 needed"}  # fmt: skip
+                f"of {len(caps)} calibration captures; >= 3 needed"}
     fits = compare_lens_models(views, size)
     out: dict[str, Any] = {"ok": True, "reason": "", "views": len(views), "models": {}}
     for name, f in fits.items():
         out["models"][name] = {"rms_px": f.rms_px, "radial_rms_px": f.radial_rms_px,
                                "radial_systematic_px": f.radial_systematic_px,
-                               "camera": f.camera.to_dict()}  # fmt: skip
+                               "camera": f.camera.to_dict()}
     even, odd = out["models"]["opencv5"], out["models"]["radial-odd"]
     out["radial_rms_ratio_even_over_odd"] = even["radial_rms_px"] / max(odd["radial_rms_px"], 1e-12)
     out["radial_systematic_ratio_even_over_odd"] = even["radial_systematic_px"] / max(
@@ -111,7 +111,7 @@ def analyze_distortion(
         ">= 1 'verification' capture of one flat verification chart filling the tele (tripod, "
         "heated), e.g. `phonestereo simulate refocus`; 'calibration' captures (9x6 chessboard) "
         "add the even-vs-odd lens comparison",
-    )  # fmt: skip
+    )
     rects = {mode: Rectification.from_rig(rig, mode) for mode in MODES}
     rect = rects[MODE]
     ms = []
@@ -121,7 +121,7 @@ def analyze_distortion(
             progress(i + 1, len(caps), c.id)
     good = [m for m in ms if m.found]
     base = {"analysis": "distortion", "capture_set": str(cs.root), "captures_total": len(ms),
-            "captures_used": len(good), "mode": MODE, "degree": DEGREE}  # fmt: skip
+            "captures_used": len(good), "mode": MODE, "degree": DEGREE}
     if not good:
         why = "; ".join(f"{m.id}: {m.reason}" for m in ms)[:600]
         return {**base, "ok": False, "reason": f"chart found in 0 captures: {why}"}, {}
@@ -136,7 +136,7 @@ def analyze_distortion(
             mode: float(np.std(r.disparity(m.q_wide, m.q_tele)[1])) for mode, r in rects.items()
         }
         rows.append({"id": m.id, "focus_group": groups[m.id], "n_corners": len(m.ids),
-                     "fix": fix.to_dict(), "e_std_by_mode_px": spread})  # fmt: skip
+                     "fix": fix.to_dict(), "e_std_by_mode_px": spread})
         per_fix.append(fix)
     q_all = np.concatenate([rect.points_wide(m.q_wide) for m in good])
     e_all = np.concatenate([m.e_px for m in good])
@@ -157,7 +157,7 @@ def analyze_distortion(
         "e_std_after_pooled_fix_px": float(np.std(e_pooled)),
         "offset_spread_over_captures_px": float(np.ptp([f.offset_px for f in per_fix])),
         "captures": rows,
-    }  # fmt: skip
+    }
     calib = _calibration_compare(cs)
     truth = _truth(cs.root, good, rect, calib)
     fits = None
@@ -169,7 +169,7 @@ def analyze_distortion(
     table["seconds"] = round(time.perf_counter() - t0, 2)
     data = {"q": q_all, "e": e_all, "e_fixed": e_fixed, "fix": pooled, "fixes": per_fix,
             "labels": [f"{r['id']} ({r['focus_group']})" for r in rows],
-            "lens_fits": fits}  # fmt: skip
+            "lens_fits": fits}
     return table, data
 
 
@@ -225,7 +225,7 @@ def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) ->
         mid = float(np.median(vals))
         lim = float(np.max(np.abs(vals - mid))) or 1e-3
         sc = ax.scatter(q[:, 0], q[:, 1], c=vals, s=7, cmap="coolwarm", vmin=mid - lim,
-                        vmax=mid + lim)  # fmt: skip
+                        vmax=mid + lim)
         fig.colorbar(sc, ax=ax, label="non-disparity error e [px]")
         ax.plot(*fix.center_px, "k+", ms=14, label="distortion centre")
         ax.set_title(f"e of every corner, {tag} (std {np.std(vals):.4f} px)")
@@ -286,13 +286,13 @@ def _lens_model_figure(fits: dict[str, LensModelFit], out_dir: Path) -> Path:
         ax.plot(rb, db, "ro-", lw=2, label="binned mean (systematic)")
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set_title(f"{name}: radial rms {f.radial_rms_px:.4f} px, "
-                     f"systematic {f.radial_systematic_px:.4f} px")  # fmt: skip
+                     f"systematic {f.radial_systematic_px:.4f} px")
         ax.set_xlabel("radius from the principal point [px]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     axes[0].set_ylabel("radial residual (predicted − observed) [px]")
     fig.suptitle("Even (opencv5) vs odd-degree (radial-odd) lens model on the same board views "
-                 "(thesis §3.2 fix 3)")  # fmt: skip
+                 "(thesis §3.2 fix 3)")
     return _save(fig, out_dir / "distortion_lens_models.png")
 
 

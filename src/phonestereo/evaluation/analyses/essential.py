@@ -66,7 +66,7 @@ def _groups(cs: CaptureSet, name: str) -> dict[str, list[CaptureEntry]]:
         if c.kind == "verification" and c.focus_group is not None:
             groups[c.focus_group].append(c)
     usable = {k: sorted(v, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
-              for k, v in groups.items() if len(v) >= MIN_ATTEMPTS}  # fmt: skip
+              for k, v in groups.items() if len(v) >= MIN_ATTEMPTS}
     if not usable:
         raise InputError(
             f"the {name} analysis needs a refocus stack: >= {MIN_ATTEMPTS} 'verification' "
@@ -90,7 +90,7 @@ def measure_stacks(
             m = measure_capture(cs, c, rect)
             rows.append({"id": c.id, "focus_group": g, "focus_attempt": c.focus_attempt,
                          "found": m.found, "reason": m.reason,
-                         "n_corners": len(m.ids)})  # fmt: skip
+                         "n_corners": len(m.ids)})
             if m.found:
                 stacks[g].append(StackAttempt(c.id, m.ids, m.q_wide, m.q_tele))
             done += 1
@@ -124,11 +124,11 @@ def _pose(rig: Rig, atts: list[StackAttempt], cmp: VariantComparison) -> dict[st
         for dst, est in ((raw, e), (fixed, e2)):
             om = np.rad2deg(cv2.Rodrigues(est.R)[0].reshape(3)) if est.ok else np.full(3, np.nan)
             dst.append({"id": a.id, "om_deg": om.round(5).tolist(),
-                        "t_unit": np.asarray(est.t).round(5).tolist()})  # fmt: skip
+                        "t_unit": np.asarray(est.t).round(5).tolist()})
     cal_om = np.rad2deg(cv2.Rodrigues(rig.T_tele_wide.R)[0].reshape(3))
     t = rig.T_tele_wide.t / np.linalg.norm(rig.T_tele_wide.t)
     return {"calibration": {"om_deg": cal_om.round(5).tolist(), "t_unit": t.round(5).tolist()},
-            "attempts": raw, "after_optimal": fixed}  # fmt: skip
+            "attempts": raw, "after_optimal": fixed}
 
 
 def _score(cmp: VariantComparison, true: Any) -> dict[str, float | None]:
@@ -182,7 +182,7 @@ def analyze_essential(
             "plane_rms_px": [round(e.plane_rms_px, 4) for e in cmp.estimates],
             "ranking": list(cmp.ranking), "methods": [r.to_dict() for r in cmp.rows],
             "pose": _pose(rig, atts, cmp),
-        }  # fmt: skip
+        }
         true = _true_scales(cs.root, [a.id for a in atts], rig)
         if true is not None:
             entry["truth"] = {
@@ -195,17 +195,17 @@ def analyze_essential(
     if not done:
         why = "; ".join(f"{k}: {v['reason']}" for k, v in groups.items())[:600]
         return {**base, "ok": False, "reason": f"no refocus stack could be compared: {why}",
-                "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+                "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}
     med: dict[str, list[float]] = defaultdict(list)
     for v in done.values():
         for m in v["methods"]:
             med[m["label"]].append(np.nan if m["median_range_px"] is None else m["median_range_px"])
     overall = sorted(med, key=lambda k: (not np.isfinite(np.nanmedian(med[k] + [np.inf])),
                                          float(np.nanmedian(med[k])) if np.isfinite(med[k]).any()
-                                         else math.inf))  # fmt: skip
+                                         else math.inf))
     out = {**base, "ok": True, "reason": "", "groups": groups, "ranking": overall,
            "best": overall[0], "_fig": figs.get("cmp"),
-           "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+           "seconds": round(time.perf_counter() - t0, 2)}
     return out
 
 
@@ -224,16 +224,16 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         patch.set_facecolor(colours.get(r.reference, "0.7"))
     ax.set_xticks(np.arange(1, len(rows) + 1),
                   [f"{r.label} ({r.attempts_ok}/{len(r.per_attempt)})" for r in rows],
-                  rotation=60, ha="right", fontsize=8)  # fmt: skip
+                  rotation=60, ha="right", fontsize=8)
     ax.set_yscale("log")
     ax.set_ylabel("per-corner disparity range over the stack [px]")
     ax.set_title(f"Disparity ranges after each method, stack {g!r}, best first "
-                 "(thesis Fig. 3-26; blue: vs first attempt, orange: vs calibration)")  # fmt: skip
+                 "(thesis Fig. 3-26; blue: vs first attempt, orange: vs calibration)")
     ax.grid(alpha=0.3, axis="y")
     missing = [r.label for r in cmp.rows if not np.isfinite(r.ranges_px).any()]
     if missing:
         ax.text(0.01, 0.98, "no result (see JSON reasons): " + ", ".join(missing),
-                transform=ax.transAxes, va="top", fontsize=8, color="0.3")  # fmt: skip
+                transform=ax.transAxes, va="top", fontsize=8, color="0.3")
     files.append(_save(fig, out_dir / "essential_ranges.png"))
     pose = tb["groups"][g]["pose"]
     fig = Figure(figsize=(10, 6.5), constrained_layout=True)
@@ -259,7 +259,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         fig = Figure(figsize=(10, 4.5), constrained_layout=True)
         axes = fig.subplots(1, 2)
         show = [r for r in cmp.rows if r.label in ("focus opt", "calib eq9", "calib E", "focus E",
-                                                   "calib Om", "calib OmT")]  # fmt: skip
+                                                   "calib Om", "calib OmT")]
         for c, ax in enumerate(axes):
             ax.plot(k, true[:, c], "k*-", ms=9, label="truth (vs calibration)")
             ax.plot(k, true[:, c] / true[0, c], "k+:", ms=9, label="truth (vs first attempt)")
@@ -283,7 +283,7 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
     if not tb["ok"]:
         return (f"essential: no result: {tb['reason']}",)
     lines = [f"essential: {len([g for g in tb['groups'].values() if g['ok']])} refocus stack(s), "
-             f"{len(tb['captures'])} captures ({tb['seconds']} s)"]  # fmt: skip
+             f"{len(tb['captures'])} captures ({tb['seconds']} s)"]
     for g, v in tb["groups"].items():
         if not v["ok"]:
             lines.append(f"{g}: no result: {v['reason']}")
@@ -302,7 +302,7 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
         elif eq9:
             lines.append(f"{g}: eq. 9 vs calibration failed: {eq9['per_attempt'][0]['reason']}")
     lines.append(f"overall best: {tb['best']}")
-    return tuple(lines)  # fmt: skip
+    return tuple(lines)
 
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:

@@ -54,7 +54,7 @@ def optimal_correction(
     after = np.array([
         rect.disparity(cw.apply(qw), ct.apply(qt))[0]
         for (qw, qt), cw, ct in zip(pts, corr[0], corr[1], strict=True)
-    ])  # fmt: skip
+    ])
     fits = [{"wide": cw.to_dict(), "tele": ct.to_dict()} for cw, ct in zip(*corr, strict=True)]
     return before, after, fits
 
@@ -66,7 +66,7 @@ def _stats(d: F64) -> dict[str, Any]:
             "p90_range_px": round(float(np.percentile(rng, 90)), 5),
             "median_relative_error_pct": round(float(np.median(rel)), 5),
             "p90_relative_error_pct": round(float(np.percentile(rel, 90)), 5),
-            "_ranges": rng, "_relative": rel}  # fmt: skip
+            "_ranges": rng, "_relative": rel}
 
 
 def _motion(root: Path, ids: list[str]) -> Any:
@@ -82,7 +82,7 @@ def _motion(root: Path, ids: list[str]) -> Any:
     for p in poses:
         rel = poses[0].inverse() @ p
         out.append({"rotation_deg": round(float(np.rad2deg(np.linalg.norm(rel.rotvec))), 5),
-                    "translation_mm": round(float(np.linalg.norm(rel.t) * 1e3), 5)})  # fmt: skip
+                    "translation_mm": round(float(np.linalg.norm(rel.t) * 1e3), 5)})
     return out
 
 
@@ -105,7 +105,7 @@ def analyze_handheld(
         keys, pts = shared_points(atts) if len(atts) >= MIN_ATTEMPTS else (np.zeros(0), [])
         if len(atts) < MIN_ATTEMPTS or len(keys) < MIN_POINTS:
             groups[g] = {"ok": False, "reason": f"{len(atts)} measured attempt(s), "
-                                                f"{len(keys)} corners in every one"}  # fmt: skip
+                                                f"{len(keys)} corners in every one"}
             continue
         before, after, fits = optimal_correction(pts, rig, rect)
         sb, sa = _stats(before), _stats(after)
@@ -117,14 +117,14 @@ def analyze_handheld(
             "before": sb, "after": sa,
             "range_shrink": round(sb["median_range_px"] / max(sa["median_range_px"], 1e-12), 3),
             "fits": fits,
-        }  # fmt: skip
+        }
         motion = _motion(cs.root, [a.id for a in atts])
         if motion is not None:
             entry["truth"] = {"motion": motion}
         groups[g] = entry
     done = {k: v for k, v in groups.items() if v["ok"]}
     base = {"analysis": "handheld", "capture_set": str(cs.root), "captures": rows,
-            "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+            "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}
     if not done:
         why = "; ".join(f"{k}: {v['reason']}" for k, v in groups.items())[:600]
         return {**base, "ok": False, "reason": f"no refocus stack could be measured: {why}"}
@@ -151,12 +151,12 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         for patch, c in zip(bp["boxes"], colours, strict=True):
             patch.set_facecolor(c)
         ax.set_xticks([3 * i + 0.5 for i in range(len(names))],
-                      [f"{g}\nnaive Z ≈ {done[g]['depth_m']:.2f} m" for g in names])  # fmt: skip
+                      [f"{g}\nnaive Z ≈ {done[g]['depth_m']:.2f} m" for g in names])
         ax.set_ylabel(ylabel)
         ax.set_title(title)
         ax.grid(alpha=0.3, axis="y")
         ax.legend([bp["boxes"][0], bp["boxes"][1]], ["before", "after optimal correction"],
-                  fontsize=8)  # fmt: skip
+                  fontsize=8)
     fig.suptitle("Handheld refocus stacks: optimal scale correction (thesis Fig. 3-27)")
     return [_save(fig, out_dir / "handheld_ranges.png")]
 

@@ -102,7 +102,7 @@ def _gates(t: F64, d: F64, min_time_s: float, max_rate: float) -> list[Any]:
         rows.append(
             {"measured_rate_px_per_s": round(rate, 6), "time_gate": g1.passed,
              "time_gate_reason": g1.reason, "rate_gate": g2.passed, "rate_gate_reason": g2.reason}
-        )  # fmt: skip
+        )
     return rows
 
 
@@ -177,14 +177,14 @@ def analyze_heating(
         {"depth_m": z, "disparity_px": round(fb / z, 4),
          "relative_error_pct": round(100 * d_range / (fb / z), 3)}
         for z in TABLE1_DEPTHS_M
-    ]  # fmt: skip
+    ]
     rows = [
         {"id": m.id, "time_s": m.time_s, "temperature_c": m.temperature_c, "found": m.found,
          "reason": m.reason, "n_corners": len(m.ids),
          "d_mean_px": None if not np.isfinite(dv) else round(float(dv), 5),
          "e_mean_px": None if not np.isfinite(ev) else round(float(ev), 5), **g}
         for m, dv, ev, g in zip(ms, d, e, gates, strict=True)
-    ]  # fmt: skip
+    ]
     out: dict[str, Any] = {
         **base, "ok": fit_d.ok, "reason": fit_d.reason,
         "captures_used": len(found), "corners_in_every_capture": len(shared),
@@ -194,7 +194,7 @@ def analyze_heating(
         "disparity_range_px": round(d_range, 5), "corrected_range_px": corrected,
         "gates": {"min_time_s": min_time_s, "max_drift_rate_px_per_s": max_drift_rate_px_per_s},
         "table1": table1, "temperature_correction": temp_corr, "captures": rows,
-    }  # fmt: skip
+    }
     truth = _truth(cs.root, ms, shared, rect)
     if truth is not None:
         if truth["tau_s"] is not None and fit_d.ok:
@@ -241,7 +241,7 @@ def _fit_panel(
     ax.axvline(tables["gates"]["min_time_s"], color="0.5", ls=":", label="time gate")
     ax.set_ylabel(f"{label} [px]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)  # fmt: skip
+    ax.legend(fontsize=8)
 
 
 def write_figures(table: dict[str, Any], out_dir: Path) -> list[Path]:
@@ -291,7 +291,7 @@ def write_figures(table: dict[str, Any], out_dir: Path) -> list[Path]:
         ax.set_xlabel("module temperature [°C]")
         ax.set_ylabel("mean disparity d [px]")
         ax.grid(alpha=0.3)
-        files.append(_save(fig, out_dir / "heating_temperature.png"))  # fmt: skip
+        files.append(_save(fig, out_dir / "heating_temperature.png"))
     return files
 
 
@@ -323,7 +323,7 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
     if "truth" in tb and tb["truth"].get("tau_rel_error") is not None:
         tr = tb["truth"]
         lines.append(f"truth: τ = {tr['tau_s']} s (error {100 * tr['tau_rel_error']:.1f} %)")
-    return tuple(lines)  # fmt: skip
+    return tuple(lines)
 
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:

@@ -131,7 +131,7 @@ def analyze_orientation(
         why = "; ".join(f"{m.id}: {m.reason}" for m in ms if not m.found)[:600]
         return {**base, "ok": False,
                 "reason": f"chart measured in {len(ms_ok)} captures over {len(set(bk_ok))} "
-                          f"orientation(s), {len(keys)} corners in every one; {why}"}  # fmt: skip
+                          f"orientation(s), {len(keys)} corners in every one; {why}"}
     ref = _reference(bk_ok)
     table = per_corner(ms_ok, keys)
     dm, de, bk = _relative_samples(table, bk_ok, ref)
@@ -141,13 +141,13 @@ def analyze_orientation(
          "found": m.found, "reason": m.reason, "n_corners": len(m.ids),
          "d_mean_px": round(float(np.mean(m.d_px)), 5) if m.found else None}
         for m, b, c in zip(ms, buckets, caps, strict=True)
-    ]  # fmt: skip
+    ]
     out: dict[str, Any] = {
         **base, "ok": True, "reason": "", "reference_bucket": ref,
         "captures_used": len(ms_ok), "corners_in_every_capture": len(keys),
         "f_px": rect.f_px, "baseline_m": rect.baseline_m,
         "offsets_relative": _offsets_rows(rel), "captures": rows,
-    }  # fmt: skip
+    }
     truth = _expected_true(cs.root, ms_ok, keys, rect)
     if truth is not None:
         d_true, d_exp = truth
@@ -157,9 +157,9 @@ def analyze_orientation(
         tm, te, tb = _relative_samples(d_true, bk_ok, ref)
         rel_true = OrientationOffsets.fit(tb, tm, te)
         err_abs = {k: abs(abs_meas.offsets[k].offset_px - abs_true.offsets[k].offset_px)
-                   for k in abs_true.offsets}  # fmt: skip
+                   for k in abs_true.offsets}
         err_rel = {k: abs(rel.offsets[k].offset_px - rel_true.offsets[k].offset_px)
-                   for k in rel_true.offsets}  # fmt: skip
+                   for k in rel_true.offsets}
         out["offsets_absolute"] = _offsets_rows(abs_meas)
         out["truth"] = {
             "offsets_absolute": _offsets_rows(abs_true),
@@ -202,7 +202,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
     vals = [rel[b]["offset_px"] for b in names]
     sig = [rel[b]["sigma_px"] or 0.0 for b in names]
     a2.bar(x, vals, yerr=sig, color=[colour[b] for b in names], capsize=4,
-           label="measured (chart corners)")  # fmt: skip
+           label="measured (chart corners)")
     if "truth" in tb:
         tr = tb["truth"]["offsets_relative"]
         a2.plot(x, [tr[b]["offset_px"] for b in names], "k_", ms=30, mew=2, label="truth")

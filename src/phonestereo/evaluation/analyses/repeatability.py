@@ -78,7 +78,7 @@ def _stats(D: F64) -> dict[str, float]:
     pc = np.ptp(D, axis=0)
     return {"corner_range_median_px": float(np.nanmedian(pc)),
             "corner_range_max_px": float(np.nanmax(pc)),
-            "chart_range_px": float(np.nanmax(D) - np.nanmin(D))}  # fmt: skip
+            "chart_range_px": float(np.nanmax(D) - np.nanmin(D))}
 
 
 def _truth_scales(root: Path, ids: list[str]) -> Any:
@@ -93,7 +93,7 @@ def _truth_scales(root: Path, ids: list[str]) -> Any:
         role: [getattr(c, role).true_camera().fx / getattr(caps[0], role).true_camera().fx
                for c in caps]
         for role in ("wide", "tele")
-    }  # fmt: skip
+    }
 
 
 def analyze_repeatability(
@@ -152,7 +152,7 @@ def analyze_repeatability(
     keys = shared_keys(used)
     if len(used) < 2 or len(keys) < 6:
         why = "; ".join(f"{r['id']}: {r['reason'] or 'focus fail'}" for r in rows
-                        if not r["found"] or r["focus_fail"])  # fmt: skip
+                        if not r["found"] or r["focus_fail"])
         reason = f"{len(used)} usable attempts, {len(keys)} corners in all: {why}"[:600]
         return {**base, "ok": False, "reason": reason, "captures": rows}
     sel = [np.intersect1d(corner_keys(m.ids), keys, return_indices=True)[1] for m in used]
@@ -161,7 +161,7 @@ def analyze_repeatability(
     D0 = np.stack([m.d_px[i] for m, i in zip(used, sel, strict=True)])  # (M, K)
     c_w, c_t = rig.wide.K[:2, 2], rig.tele.K[:2, 2]
     fits = {"wide": [fit_scale_offset(Qw[0], q, c_w) for q in Qw],
-            "tele": [fit_scale_offset(Qt[0], q, c_t) for q in Qt]}  # fmt: skip
+            "tele": [fit_scale_offset(Qt[0], q, c_t) for q in Qt]}
     corr = {role: normalise_to_median(f) for role, f in fits.items()}
     Qw_n = np.stack([t.apply(q) for t, q in zip(corr["wide"], Qw, strict=True)])
     Qt_n = np.stack([t.apply(q) for t, q in zip(corr["tele"], Qt, strict=True)])
@@ -177,7 +177,7 @@ def analyze_repeatability(
                        "corner_range_max_px": float(np.nanmax(pc)),
                        "relative_error_median_pct": float(np.nanmedian(rel)),
                        "relative_error_p90_pct": float(np.nanpercentile(rel, 90)),
-                       "relative_error_max_pct": float(np.nanmax(rel))})  # fmt: skip
+                       "relative_error_max_pct": float(np.nanmax(rel))})
         avg[n] = pc
     out: dict[str, Any] = {
         **base, "ok": True, "reason": "", "corners_in_every_attempt": len(keys),
@@ -189,11 +189,11 @@ def analyze_repeatability(
         "fits": {role: [f.to_dict() for f in fs] for role, fs in fits.items()},
         "corrections": {role: [f.to_dict() for f in fs] for role, fs in corr.items()},
         "table3": table3, "trials": trials, "captures": rows,
-    }  # fmt: skip
+    }
     truth = _truth_scales(cs.root, [m.id for m in used])
     if truth is not None:
         err = {r: float(np.max(np.abs(np.array([f.scale for f in fits[r]]) - np.array(truth[r]))))
-               for r in ("wide", "tele")}  # fmt: skip
+               for r in ("wide", "tele")}
         out["truth"] = {"scale_ratio": truth, "scale_error_max": err}
     out["_xy"] = np.nanmean(rect.points_wide(Qw), axis=0)
     out["_before"], out["_after"], out["_avg"] = D0, D1, avg
@@ -208,7 +208,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
     axes = fig.subplots(1, 2)
     top = float(np.nanmax(np.ptp(tb["_before"], axis=0)))
     for ax, key, name in zip(axes, ("_before", "_after"), ("raw", "normalised to the median"),
-                             strict=True):  # fmt: skip
+                             strict=True):
         pc = np.ptp(tb[key], axis=0)
         map_panel(
             fig,
@@ -230,7 +230,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         map_panel(fig, ax, xy, tb["_avg"][r["n"]], f"mean of {r['n']} attempt(s): range median "
                   f"{r['corner_range_median_px']:.3f} px, rel. error median "
                   f"{r['relative_error_median_pct']:.2f} %",
-                  f"range over {tb['trials']} random draws [px]", vmin=0, vmax=top)  # fmt: skip
+                  f"range over {tb['trials']} random draws [px]", vmin=0, vmax=top)
     fig.suptitle("Averaging the disparity over refocus attempts (thesis Fig. 3-21, Table 3)")
     files.append(save_figure(fig, out_dir / "repeatability_averaging.png"))
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
@@ -240,7 +240,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         ax.plot(range(len(s)), s, mk + "-", label=f"{role}: fitted (vs attempt 0)")
         if "truth" in tb:
             ax.plot(range(len(s)), tb["truth"]["scale_ratio"][role], "x", ms=9,
-                    label=f"{role}: true focal ratio")  # fmt: skip
+                    label=f"{role}: true focal ratio")
     ax.set_title("Same-camera scale of each refocus attempt against the first")
     ax.set_xlabel("focus attempt (usable, in order)")
     ax.set_ylabel("scale s [-]")
@@ -265,11 +265,11 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
             f"mean of {r['n']}: range {r['corner_range_median_px']:.3f} px, error "
             f"{r['relative_error_median_pct']:.2f} % (p90 {r['relative_error_p90_pct']:.2f} %)"
             for r in tb["table3"]),
-    ]  # fmt: skip
+    ]
     if "truth" in tb:
         e = tb["truth"]["scale_error_max"]
         lines.append(f"truth: same-camera scale error ≤ {e['wide']:.1e} (wide), "
-                     f"{e['tele']:.1e} (tele)")  # fmt: skip
+                     f"{e['tele']:.1e} (tele)")
     return tuple(lines)
 
 

@@ -125,7 +125,7 @@ def _mode_row(rect: Rectification, p: dict[str, Any]) -> dict[str, Any]:
     labs = np.asarray(p["lab"])
     depth = {n: float(np.nanmedian(rect.depth(p["d"][labs == n]))) for n in CHARTS}
     return {"agreement": ag.to_dict(), "spread_px": ag.spread_px,
-            "translation_from_e": tf.to_dict(), "median_depth_m": depth}  # fmt: skip
+            "translation_from_e": tf.to_dict(), "median_depth_m": depth}
 
 
 def analyze_translation(
@@ -139,7 +139,7 @@ def analyze_translation(
         ">= 1 'verification' capture showing two verification charts at two depths (a "
         "10x8-square 18 mm chart near, the standard chart far; tripod), e.g. "
         "`phonestereo simulate dual-depth`",
-    )  # fmt: skip
+    )
     ms = []
     for i, c in enumerate(caps):
         ms.append(_measure(cs, c))
@@ -147,7 +147,7 @@ def analyze_translation(
             progress(i + 1, len(caps), c.id)
     good = [m for m in ms if m["found"]]
     base: dict[str, Any] = {"analysis": "translation", "capture_set": str(cs.root),
-                            "captures_total": len(ms), "captures_used": len(good)}  # fmt: skip
+                            "captures_total": len(ms), "captures_used": len(good)}
     if not good:
         why = "; ".join(f"{m['id']}: {m['reason']}" for m in ms)[:600]
         return {**base, "ok": False, "reason": f"two charts found in 0 captures: {why}"}, {}
@@ -160,7 +160,7 @@ def analyze_translation(
     _, e_fixed = fix.correct(pc["q"], pc["d"], pc["e"])
     ag_fixed = depth_agreement(e_fixed, pc["lab"])
     modes[FIXED] = {"agreement": ag_fixed.to_dict(), "spread_px": ag_fixed.spread_px,
-                    "radial_fix": fix.to_dict()}  # fmt: skip
+                    "radial_fix": fix.to_dict()}
     pb = pooled[BEFORE]  # e the calibration's t_y, t_z predict at each corner's depth and row
     e_pred = predicted_nondisparity_px(
         comps, rects[BEFORE].f_px, rc.depth(pc["d"]), pb["q"][:, 1] - rects[BEFORE].wide_rect.cy
@@ -174,7 +174,7 @@ def analyze_translation(
         "spread_before_px": modes[BEFORE]["spread_px"],
         "spread_after_px": modes[AFTER]["spread_px"],
         "modes": modes,
-    }  # fmt: skip
+    }
     truth = _truth(cs.root, good, rects)
     if truth is not None:
         table["truth"] = truth
@@ -216,7 +216,7 @@ def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) ->
                 lim = float(np.nanmax(np.abs(vals - np.nanmedian(vals)))) or 1e-3
                 mid = float(np.nanmedian(vals))
                 sc = ax.scatter(p["q"][:, 0], p["q"][:, 1], c=vals, s=6, cmap="coolwarm",
-                                vmin=mid - lim, vmax=mid + lim)  # fmt: skip
+                                vmin=mid - lim, vmax=mid + lim)
             else:
                 sc = ax.scatter(p["q"][:, 0], p["q"][:, 1], c=vals, s=6, cmap="viridis")
             fig.colorbar(sc, ax=ax, label=f"{name} [px]")

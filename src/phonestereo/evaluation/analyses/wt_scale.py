@@ -129,17 +129,17 @@ def _true_fits(root: Path, cid: str, charts: list[ChartPoints], rect: Rectificat
     glob = _fit(np.concatenate(qws), np.concatenate(qts), c).scale
     return {"scale_global": glob, "scale_per_chart": per, "objects": names,
             "focal_scale_wide": cap.wide.focal_scale,
-            "focal_scale_tele": cap.tele.focal_scale}  # fmt: skip
+            "focal_scale_tele": cap.tele.focal_scale}
 
 
 def _capture_row(
     entry: CaptureEntry, charts: list[ChartPoints], reason: str, c: F64, root: Path,
     rect: Rectification,
-) -> dict[str, Any]:  # fmt: skip
+) -> dict[str, Any]:
     row: dict[str, Any] = {
         "id": entry.id, "attempt": entry.focus_attempt, "found": bool(charts), "reason": reason,
         "n_corners": [len(ch.ids) for ch in charts],
-    }  # fmt: skip
+    }
     if not charts:
         return row
     qw, qt = (
@@ -150,7 +150,7 @@ def _capture_row(
     per = [_fit(ch.q_wide, ch.q_tele, c) for ch in charts] if len(charts) > 1 else [glob]
     labels = cluster_disparities(np.concatenate([ch.d for ch in charts]))
     row.update(global_fit=glob.to_dict(), chart_fits=[f.to_dict() for f in per],
-               disparity_clusters=int(labels.max() + 1))  # fmt: skip
+               disparity_clusters=int(labels.max() + 1))
     if len(charts) == 1:
         row["flat_scene"] = flat_scene_scale(qw, qt, c).to_dict()
     truth = _true_fits(root, entry.id, charts, rect)
@@ -203,7 +203,7 @@ def _stack_stats(rows: list[dict[str, Any]], k: int, rect: Rectification) -> Any
             "corner_range_max_px": float(np.nanmax(pc)),
             "within_attempt_range_px": float(np.nanmean(np.ptp(D, axis=1))),
             "table2": _table2(xy.mean(axis=0), D),
-        }  # fmt: skip
+        }
     out["chart_range_shrink"] = out["before"]["chart_range_px"] / max(
         out["after"]["chart_range_px"], 1e-9
     )
@@ -241,12 +241,12 @@ def analyze_wt_scale(
         r.update(f)
     base = {"analysis": "wt-scale", "capture_set": str(cs.root), "focus_group": caps[0].focus_group,
             "captures_total": len(rows), "f_px": rect.f_px, "baseline_m": rect.baseline_m,
-            "center_px": c.tolist()}  # fmt: skip
+            "center_px": c.tolist()}
     used = [r for r in rows if r["found"] and not r["focus_fail"]]
     if len(used) < 2:
         why = "; ".join(f"{r['id']}: {r['reason'] or 'focus fail'}" for r in rows if r not in used)
         return {**base, "ok": False, "reason": f"{len(used)} usable attempts: {why}"[:600],
-                "captures": rows}  # fmt: skip
+                "captures": rows}
     n_charts = min(len(r["_charts"]) for r in used)
     stack = [_stack_stats(rows, k, rect) for k in range(n_charts)]
     if any(st is None for st in stack):
@@ -254,7 +254,7 @@ def analyze_wt_scale(
         return {**base, "ok": False, "captures": rows, "reason": why}
     return {**base, "ok": True, "reason": "", "captures_used": len(used), "charts": n_charts,
             "stack": stack, "captures": rows,
-            "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+            "seconds": round(time.perf_counter() - t0, 2)}
 
 
 # --- figures -----------------------------------------------------------------------------------
@@ -270,7 +270,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         ranges = ", ".join(f"chart {s['chart']}: {s[when]['chart_range_px']:.2f} px" for s in stack)
         label = f"per-corner d range over {stack[0]['attempts']} attempts [px]"
         map_panel(fig, ax, xy, v, f"{when} W-T scale fix — chart disparity range {ranges}",
-                  label, vmin=0, vmax=top)  # fmt: skip
+                  label, vmin=0, vmax=top)
     fig.suptitle("Per-corner disparity range over the refocus stack (thesis Fig. 3-14 to 3-16)")
     files.append(save_figure(fig, out_dir / "wt_scale_corner_range.png"))
     r = next(r for r in tb["captures"] if r["found"] and not r["focus_fail"])
@@ -282,13 +282,13 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
     ]
     for j, (name, raw, fx) in enumerate((("d", "d", 0), ("e", "e", 1))):
         vals = (np.concatenate([getattr(ch, raw) for ch in r["_charts"]]),
-                np.concatenate([x[fx] for x in fixed]))  # fmt: skip
+                np.concatenate([x[fx] for x in fixed]))
         for i, when in enumerate(("before", "after")):
             map_panel(fig, axes[i, j], xy, vals[i], f"{name} {when} the scale fix (range "
-                      f"{np.ptp(vals[i]):.3f} px)", f"{name} [px]", cmap="coolwarm")  # fmt: skip
+                      f"{np.ptp(vals[i]):.3f} px)", f"{name} [px]", cmap="coolwarm")
     scales = ", ".join(f"{f.scale:.5f}" for f in r["_fits"])
     fig.suptitle(f"{r['id']}: disparity d and non-disparity error e, W-T scale(s) {scales} "
-                 "(thesis Fig. 3-16 to 3-19)")  # fmt: skip
+                 "(thesis Fig. 3-16 to 3-19)")
     files.append(save_figure(fig, out_dir / "wt_scale_maps.png"))
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
     ax = fig.subplots()
@@ -299,7 +299,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         ax.plot(att, [r["chart_fits"][k]["scale"] for r in used], "o-", label=f"{name} measured")
         if "truth" in used[0]:
             ax.plot(att, [r["truth"]["scale_per_chart"][k] for r in used], "x", ms=9,
-                    label=f"{name} truth")  # fmt: skip
+                    label=f"{name} truth")
     if tb["charts"] > 1:
         ax.plot(att, [r["global_fit"]["scale"] for r in used], "s--", label="all points")
     ax.set_title("W-T scale per refocus attempt (tele about its rectified principal point)")
@@ -318,7 +318,7 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
     fails = sum(r["focus_fail"] for r in tb["captures"])
     lines = [f"wt-scale: {tb['captures_used']}/{tb['captures_total']} attempts of stack "
              f"{tb['focus_group']} ({fails} focus fails), {tb['charts']} chart(s) "
-             f"({tb['seconds']} s)"]  # fmt: skip
+             f"({tb['seconds']} s)"]
     for s in tb["stack"]:
         b, a = s["before"], s["after"]
         lines.append(

@@ -247,7 +247,7 @@ class LandmarkBackend(ABC):
         return make_result(
             kept, res.image_size, res.backend, rejected=res.rejected, notes=res.notes,
             empty_reason=why,
-        )  # fmt: skip
+        )
 
     def detect_pair(
         self, wide: ImageLike, tele: ImageLike, guide: TeleGuide | None = None

@@ -95,7 +95,7 @@ def tile_grid(
         fine, overlap = two_level
         if not 0 < overlap < fine < 1:
             raise InputError(f"two_level must be (fine, overlap) with 0 < overlap < fine < 1, "
-                             f"got {two_level}")  # fmt: skip
+                             f"got {two_level}")
         small = max(round(fine * side), 1)
         step = small - round(overlap * side)
         out.append((0, 0, side))

@@ -45,7 +45,7 @@ from phonestereo.features.landmarks.pose import MAX_YAW_RAD, yaw_from_euler, yaw
 IBUG_SYMMETRIC_PAIRS = (
     (0, 16), (1, 15), (2, 14), (3, 13), (4, 12), (36, 45), (39, 42), (31, 35), (48, 54),
     (17, 26), (21, 22),
-)  # fmt: skip
+)
 N_FACE, N_EYE = 68, 56
 
 
@@ -120,7 +120,7 @@ def read_openface_csv(
         out[frame] = make_result(
             faces, image_size, "openface", rejected=rejected, notes=notes,
             empty_reason="the CSV has no face rows for this frame",
-        )  # fmt: skip
+        )
     return out
 
 
@@ -142,7 +142,7 @@ def _row_face(
         eye = np.column_stack(
             [row[_cols("eye_lmk_x_", N_EYE)].to_numpy(float),
              row[_cols("eye_lmk_y_", N_EYE)].to_numpy(float)]
-        )  # fmt: skip
+        )
         if not np.isfinite(eye).all():
             eye = None
     pupils, centres, source = ibug68_eyes(xy, eye)

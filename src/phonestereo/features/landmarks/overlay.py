@@ -12,7 +12,7 @@ from phonestereo.features.landmarks.eyes import IBUG_EYE_CONTOUR, MP_EYE_CONTOUR
 
 _GREEN, _RED, _BLUE, _ORANGE, _GREY = (0, 200, 0), (0, 0, 255), (255, 120, 0), (0, 140, 255), (
     160, 160, 160,
-)  # fmt: skip
+)
 
 
 def _pt(p: Any) -> tuple[int, int]:
@@ -67,13 +67,13 @@ def draw_faces(image: object, result: FaceResult) -> U8:
         label = f"#{k} ipd {f.ipd_px:.1f}px yaw {yaw}deg"
         fit = max(0.3, min(font, 1.5 * (x1 - x0) / (20.0 * len(label))))  # about the box width
         cv2.putText(out, label, _pt((x0, y0 - 6 * fit)), cv2.FONT_HERSHEY_SIMPLEX,
-                    fit, _GREEN, max(1, round(2 * fit)), cv2.LINE_AA)  # fmt: skip
+                    fit, _GREEN, max(1, round(2 * fit)), cv2.LINE_AA)
     for r in result.rejected:
         x0, y0, x1, y1 = r.box_px
         cv2.rectangle(out, _pt((x0, y0)), _pt((x1, y1)), _ORANGE, thick, cv2.LINE_AA)
         cv2.putText(out, r.reason[:60], _pt((x0, y1 + 16 * max(scale, 0.6))),
-                    cv2.FONT_HERSHEY_SIMPLEX, font, _ORANGE, thick, cv2.LINE_AA)  # fmt: skip
+                    cv2.FONT_HERSHEY_SIMPLEX, font, _ORANGE, thick, cv2.LINE_AA)
     banner = f"{len(result)} face(s)" if result.found else f"no face: {result.reason}"
     cv2.putText(out, banner[:90], (10, round(28 * max(scale, 0.6))), cv2.FONT_HERSHEY_SIMPLEX,
-                1.6 * font, _GREEN if result.found else _RED, thick, cv2.LINE_AA)  # fmt: skip
+                1.6 * font, _GREEN if result.found else _RED, thick, cv2.LINE_AA)
     return out

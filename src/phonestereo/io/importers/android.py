@@ -180,7 +180,7 @@ def gravity_from_accelerometer(a: Any, R_cam_dev: Any) -> tuple[float, float, fl
 def _load_dump(dump: Path) -> tuple[AndroidSession, list[tuple[Path, AndroidCapture]]]:
     session_path = dump / SESSION_NAME
     session = validate_dump(AndroidSession, read_json(session_path, "session file"),
-                            SESSION_NAME, DOC)  # fmt: skip
+                            SESSION_NAME, DOC)
     files = sorted((dump / CAPTURE_DIR).glob("*.json"))
     if not files:
         raise InputError(f"no capture JSON in '{dump / CAPTURE_DIR}'; see {DOC}")

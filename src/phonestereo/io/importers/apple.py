@@ -107,7 +107,7 @@ def output_camera(
     center = (cal.lensDistortionCenter.x, cal.lensDistortionCenter.y)
     lens, fit_px = fit_radial_odd(K_ref, center, cal.lensDistortionLookupTable, ref)
     inv_px = inverse_consistency(center, cal.lensDistortionLookupTable,
-                                 cal.inverseLensDistortionLookupTable, ref)  # fmt: skip
+                                 cal.inverseLensDistortionLookupTable, ref)
     notes.append(
         f"{camera}: lookup table fitted by radial-odd to {fit_px * sx:.4f} px (max, image "
         f"pixels); inverse table agrees to {inv_px * sx:.3f} px; focal length "
@@ -147,7 +147,7 @@ def import_apple(dump: str | os.PathLike[str], out: str | os.PathLike[str]) -> I
     if not root.is_dir():
         raise InputError(f"Apple dump folder '{root}' not found; give the folder with session.json")
     session = validate_dump(AppleSession, read_json(root / "session.json", "session file"),
-                            "session.json", DOC)  # fmt: skip
+                            "session.json", DOC)
     files = sorted((root / "captures").glob("*.json"))
     if not files:
         raise InputError(f"no capture JSON in '{root / 'captures'}'; see {DOC}")
@@ -155,7 +155,7 @@ def import_apple(dump: str | os.PathLike[str], out: str | os.PathLike[str]) -> I
     notes: list[str] = []
     T_ref = {i: extrinsic_transform(session.cameras[i].extrinsicMatrix,
                                     f"cameras.{i}.extrinsicMatrix", "session.json", notes)
-             for i in ids}  # fmt: skip
+             for i in ids}
     focal = {}
     for i in ids:
         c = session.cameras[i]
@@ -173,7 +173,7 @@ def import_apple(dump: str | os.PathLike[str], out: str | os.PathLike[str]) -> I
     fits: dict[str, float] = {}
     entries, images = [], []
     loaded = [(f, validate_dump(AppleCapture, read_json(f, "capture file"), f.name, DOC))
-              for f in files]  # fmt: skip
+              for f in files]
     for f, cap in loaded:
         if sorted(cap.cameras) != sorted(ids):
             raise InputError(

@@ -92,7 +92,7 @@ def _glob(pattern: str, what: str) -> list[ExifShot]:
     paths = sorted(Path(p) for p in glob.glob(os.path.expanduser(pattern)))
     if not paths:
         raise InputError(f"{what} '{pattern}' matches no file; quote the glob so the shell "
-                         "passes it unexpanded, e.g. 'photos/wide_*.jpg'")  # fmt: skip
+                         "passes it unexpanded, e.g. 'photos/wide_*.jpg'")
     return [read_exif(p) for p in paths]
 
 
@@ -161,7 +161,7 @@ def import_exif(
         used.add(best.path)
         pairs.append((w, best))
     notes += [f"{t.path.name}: no wide image within {max_gap_s:g} s; left out"
-              for t in teles if t.path not in used]  # fmt: skip
+              for t in teles if t.path not in used]
     if not pairs:
         raise InputError(
             f"no wide/tele pair within {max_gap_s:g} s; check the globs or --max-gap-s"
