@@ -41,9 +41,10 @@ test: lint typecheck imports unit
 # test); `make test` runs the fast ones. .ci/run runs both, with CI=true (missing real data or
 # Chromium fails instead of skipping).
 acceptance: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) -m slow -rs --durations=20
+	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) -m 'slow and not bench' -rs --durations=20
 
 bench: acceptance
+	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) -m bench -rs
 	MPLBACKEND=Agg $(BIN)/python benchmarks/run_all.py
 
 clean:

@@ -171,6 +171,7 @@ def test_three_plane_single_shot_recovers_truth(seed: int, tmp_path: Path) -> No
 
 
 @pytest.mark.slow
+@pytest.mark.bench  # 20 rendered seeds through the shipped detector: > 15 min on 2 cores
 def test_twenty_seeds_every_parameter_within_its_covariance() -> None:
     with ProcessPoolExecutor() as pool:
         runs = list(pool.map(evaluate_seed, range(20), [CalibrationConfig()] * 20))
