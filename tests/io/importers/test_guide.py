@@ -47,7 +47,12 @@ def guide_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Any]
 def test_every_guide_command_succeeds(guide_run: tuple[Path, list[Any]]) -> None:
     cwd, results = guide_run
     for cmd, r in zip(guide_commands(), results, strict=True):
-        assert r.exit_code == 0, (cmd, r.output)
+        # `depth` exits 1 when a capture is gated (docs/own-phone.md says so): the quick
+        # virtual phone learns its faces at one distance, so the charts far from it are gated
+        # `extrapolation` with the learned range in the reason instead of answered (issue #18)
+        ok = (0, 1) if cmd[1] == "depth" else (0,)
+        assert r.exit_code in ok, (cmd, r.output)
+    assert "extrapolation" in results[4].output or results[4].exit_code == 0
     assert (cwd / "my_set" / "calibration.json").is_file()
     assert (cwd / "my_iphone_set" / "manifest.json").is_file()
     assert "m" in results[4].output  # depth printed its table
@@ -63,6 +68,9 @@ def test_imported_android_set_scores_like_the_native_set(guide_run: tuple[Path, 
     for stage in ("naive", "measured", "full"):
         for stat in ("median_rel_err", "p90_rel_err"):
             a, b = native["stages"][stage][stat], imported["stages"][stage][stat]
+            if a is None or b is None:  # every capture of the stage gated: in both sets
+                assert a is None and b is None, (stage, stat, a, b)
+                continue
             assert abs(a - b) <= 0.0005, (stage, stat, a, b)  # 0.05 percentage points
     for a, b in zip(native["captures"], imported["captures"], strict=True):
         assert a["capture_id"] == b["capture_id"] and a["ok"] == b["ok"]
