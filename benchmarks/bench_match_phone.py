@@ -1,17 +1,7 @@
-"""The sparse matcher on real phone pairs: ../shared/data/phone_wide_ultra (issue #16 item 4).
+"""The sparse matcher on real phone pairs (../shared/data/phone_wide_ultra): the per-pair table.
 
-Real ultra-wide (our ``wide``) + wide (our ``tele``) 480 × 424 JPEGs out of a phone's ISP, with a
-third party's OpenCV calibration (camera 1 = the phone's wide = our tele). Per pair, through the
-product: the calibration converted by :func:`phonestereo.io.opencv_yaml.import_opencv_yaml`
-(``convert-calibration … --first-camera tele``), the pair rectified in canonical mode
-(:class:`phonestereo.rectification.rectify.Rectification`, the tele's field of view), matched
-with :func:`phonestereo.features.matching.match_rectified` both ways. Reported: the matches,
-the median |e| (row error after rectification, px) and the left→right vs right→left
-consistency: the pair is matched again with the images swapped and mirrored (x → W − 1 − x keeps
-d > 0), matches are paired by position (same left pixel within 1 px: the mirrored right point
-x − d), and RMS of (d_LR − d_RL) / √(σ_LR² + σ_RL²) is reported (≈ 1 for honest σ).
-
-``python benchmarks/bench_match_phone.py`` prints the per-pair table.
+What is measured and how is ``tests/_support/match_phone.py`` (shared with
+``tests/features/test_match_isp.py``). ``python benchmarks/bench_match_phone.py`` prints it.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ consistency: the pair is matched again with the images swapped and mirrored (x �
 d > 0), matches are paired by position (same left pixel within 1 px: the mirrored right point
 x − d), and RMS of (d_LR − d_RL) / √(σ_LR² + σ_RL²) is reported (≈ 1 for honest σ).
 
-``python benchmarks/bench_match_phone.py`` prints the per-pair table.
+``benchmarks/bench_match_phone.py`` prints the per-pair table.
 """
 
 from __future__ import annotations

@@ -58,6 +58,7 @@ from phonestereo.io.importers.android_schema import (
 )
 from phonestereo.io.importers.common import (
     ImportResult,
+    capture_entry,
     image_size,
     platform_K_to_image,
     read_json,
@@ -302,21 +303,12 @@ def _entry(
             "one of the orientation buckets); without it the orientation fix cannot be used"
         )
     suffix = {r: here[i][1].suffix.lower() for r, i in (("wide", wide_id), ("tele", tele_id))}
-    try:
-        return CaptureEntry(
-            id=cap.id,
-            wide=f"images/{cap.id}_wide{suffix['wide']}",
-            tele=f"images/{cap.id}_tele{suffix['tele']}",
-            time_s=round(dt_ns * 1e-9, 9),
-            gravity=gravity,
-            orientation=cap.orientation,
-            kind=cap.kind,
-            focus_group=cap.focus_group,
-            focus_attempt=cap.focus_attempt,
-            focus_mode="manual" if res.af_mode == 0 else "auto",
-            focus_position=res.focus_distance,
-            temperature_c=cap.temperature_c,
-            roi=cap.roi,
-        )
-    except ValueError as exc:
-        raise InputError(f"{source}: {exc}") from exc
+    return capture_entry(
+        cap,
+        source,
+        (suffix["wide"], suffix["tele"]),
+        dt_ns * 1e-9,
+        gravity,
+        res.af_mode == 0,
+        res.focus_distance,
+    )

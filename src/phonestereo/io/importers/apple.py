@@ -45,6 +45,7 @@ from phonestereo.io.importers.apple_lut import fit_radial_odd, inverse_consisten
 from phonestereo.io.importers.apple_schema import AppleCalibration, AppleCapture, AppleSession
 from phonestereo.io.importers.common import (
     ImportResult,
+    capture_entry,
     image_size,
     nearest_rotation_checked,
     platform_K_to_image,
@@ -229,21 +230,6 @@ def _entry(cap: AppleCapture, source: str, wide_id: str, tele_id: str, t0: float
         )
     sw = Path(shot.image).suffix.lower()
     st = Path(cap.cameras[tele_id].image).suffix.lower()
-    try:
-        return CaptureEntry(
-            id=cap.id,
-            wide=f"images/{cap.id}_wide{sw}",
-            tele=f"images/{cap.id}_tele{st}",
-            time_s=round(dt, 9),
-            gravity=gravity,
-            orientation=cap.orientation,
-            kind=cap.kind,
-            focus_group=cap.focus_group,
-            focus_attempt=cap.focus_attempt,
-            focus_mode="manual" if shot.focusMode == 0 else "auto",
-            focus_position=shot.lensPosition,
-            temperature_c=cap.temperature_c,
-            roi=cap.roi,
-        )
-    except ValueError as exc:
-        raise InputError(f"{source}: {exc}") from exc
+    return capture_entry(
+        cap, source, (sw, st), dt, gravity, shot.focusMode == 0, shot.lensPosition
+    )

@@ -40,7 +40,7 @@ from phonestereo.geometry.transform import (
     orthonormality_error,
 )
 from phonestereo.io.calibration import Calibration, save_calibration
-from phonestereo.io.manifest import Manifest, write_manifest
+from phonestereo.io.manifest import CaptureEntry, Manifest, write_manifest
 
 STANDARD_GRAVITY = 9.80665  # m/s², the accelerometer's 1 g
 
@@ -224,6 +224,42 @@ def validate_dump(model: Any, data: Any, source: str, doc: str) -> Any:
             lines.append(f"{source}: key '{key}': {msg}")
         more = f" (and {len(exc.errors()) - 5} more)" if len(exc.errors()) > 5 else ""
         raise InputError("\n".join(lines) + more + f"; the dump format is in {doc}") from None
+
+
+def capture_entry(
+    cap: Any,
+    source: str,
+    suffixes: tuple[str, str],
+    time_s: float,
+    gravity: tuple[float, float, float] | None,
+    manual_focus: bool,
+    focus_position: float | None,
+) -> CaptureEntry:
+    """The manifest entry of one dumped capture (both platforms' dumps share these fields).
+
+    ``cap`` carries the dump's ``id``, ``orientation``, ``kind``, ``focus_group``,
+    ``focus_attempt``, ``temperature_c`` and ``roi``; the images are
+    ``images/<id>_{wide,tele}<suffix>``. A value the manifest refuses is an InputError naming
+    the dump file ``source``.
+    """
+    try:
+        return CaptureEntry(
+            id=cap.id,
+            wide=f"images/{cap.id}_wide{suffixes[0]}",
+            tele=f"images/{cap.id}_tele{suffixes[1]}",
+            time_s=round(time_s, 9),
+            gravity=gravity,
+            orientation=cap.orientation,
+            kind=cap.kind,
+            focus_group=cap.focus_group,
+            focus_attempt=cap.focus_attempt,
+            focus_mode="manual" if manual_focus else "auto",
+            focus_position=focus_position,
+            temperature_c=cap.temperature_c,
+            roi=cap.roi,
+        )
+    except ValueError as exc:
+        raise InputError(f"{source}: {exc}") from exc
 
 
 def read_json(path: Path, what: str) -> Any:
