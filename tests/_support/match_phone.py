@@ -32,10 +32,9 @@ from phonestereo.rectification.rectify import Rectification
 
 DATA = SHARED_DATA / "phone_wide_ultra"
 SIZE = (480, 424)
-#: the misfit floor also after blur equalisation: the phone's tele, downscaled to the wide's
-#: scale, is sharper and gets blurred, and the computed noise of the blurred image (white-noise
-#: model) is far below the ISP's correlated misfit (floors 16–74 noise variances measured)
-CONFIG = MatchConfig(floor_after_blur=True)
+#: the product's default matcher (the misfit floor, measured in units of the pair's input noise,
+#: holds after the blur equalisation that the phone's sharper tele triggers)
+CONFIG = MatchConfig()
 MAX_DISPARITY = 64  # px at the wide's rectified scale: 1 m at f ≈ 390 px, B ≈ 1.9 cm gives 7.5
 
 

@@ -21,7 +21,8 @@ needs_data = pytest.mark.skipif(
 # measured (matches, median |d − GT| px): clean Adirondack 883, 0.0188; Piano 641, 0.0670;
 # motorcycle 565, 0.0725. Passing cases measured: Adirondack q95 742 (84 %) 0.0241, sharpened
 # 840 (95 %) 0.0200; Piano q95 548 (85 %) 0.0664, sharpened 522 (81 %) 0.0645; motorcycle q95
-# 580 0.0728, q85 609 0.0859, q70 603 0.0926, sharpened 397 (70.3 %) 0.0710, denoised 556 0.0742
+# 580 0.0728, q85 609 0.0859, q70 603 0.0926, sharpened 511 (90 %) 0.0727 (397, 0.0710 while the
+# misfit floor was skipped after blur equalisation), denoised 556 0.0742
 MISSES = {
     ("Adirondack", "jpeg85"): "702 matches (80 %) but median 0.0410 px > 0.0388",
     ("Adirondack", "jpeg70"): "644 matches (73 %) but median 0.0611 px > 0.0388",
@@ -99,12 +100,14 @@ def test_real_phone_pairs() -> None:
     rows = [phone.evaluate(w, t) for _, w, t in phone.pairs()]
     assert len(rows) == 16
     n100 = sum(r["matches"] >= 100 for r in rows)
-    # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured 102–253 on 16 of 16
+    # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured with the default MatchConfig
+    # (the misfit floor in input-noise units, also after blur equalisation) 86–227, ≥ 100 on
+    # 15 of 16 (0–22 per pair when the floor was skipped after equalisation)
     assert n100 >= 0.8 * len(rows), [r["matches"] for r in rows]
     # the rows line up to within the third party's calibration: measured median |e| 0.2–2.0 px
     assert all(r["median_abs_e_px"] < 3.0 for r in rows), [r["median_abs_e_px"] for r in rows]
     z = np.array([r["rms_z"] for r in rows])
-    # left→right vs right→left RMS z: acceptance 0.8–1.25; measured 0.42–3.2 (median 1.38):
+    # left→right vs right→left RMS z: acceptance 0.8–1.25; measured 0.43–3.2 (median 1.26):
     # below 1 where the rows line up (Roll, |e| ≈ 0.2 px), 2–3 where they are 1.5–2 px off
     # (Forward): not met per pair, guard the median
     assert 0.8 <= float(np.nanmedian(z)) <= 2.0, z

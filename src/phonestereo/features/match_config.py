@@ -80,18 +80,20 @@ class MatchConfig:
         The median window residual (in noise variances σ_L² + a²σ_R²) that a pair without
         ISP processing already shows and that does not raise the floor: clean real pairs
         measure 2.0 (Adirondack, Piano) and 5.7 (motorcycle, GT-consistent left); JPEG q95 /
-        q85 / q70 12 / 52 / 132 (Adirondack). The floor is max(1, median / 6).
+        q85 / q70 12 / 52 / 132 (Adirondack). The floor is max(1, median / 6). It is
+        measured in units of the pair's *input* noise model, before blur equalisation, and
+        applies after it too: the equalisation lowers the computed noise of the blurred image,
+        not the misfit a clean pair shows, so in the blurred image's units a clean but
+        blurred pair would read a floor (motorcycle, one image blurred 0.7–1 px: median error
+        1.2–1.4×), while in the input's units it reads ≤ 1 and nothing changes; a phone
+        pair's ISP misfit raises it either way (phone_wide_ultra: ≥ 100 matches on 15 of 16
+        pairs, 0–22 per pair when the floor was skipped after equalisation; the sharpened
+        motorcycle keeps 511 of 565 instead of 397).
     typical_normalized : float
         The same for the normalised residual s² / window variance: clean 0.014 (Adirondack),
         0.029 (motorcycle); JPEG q85 0.073, q70 0.10. The normalised test's bound is raised by
         max(1, median / 0.02): at 0.03 the motorcycle's figures stay as before, but JPEG q85
         keeps only 56–67 % of the matches.
-    floor_after_blur : bool
-        Also apply the floors after blur equalisation (False: the equalisation models the
-        pair's misfit). Real phone pairs need it (the sharper tele is blurred, and the computed
-        noise of the blurred image is far below the ISP's misfit: phone_wide_ultra keeps 0–22
-        matches per pair without it, 102–253 with it); on the motorcycle pair with one image
-        blurred by 0.7–1 px it raises the median error 1.2–1.4× (tests/features/test_match_blur).
     correlated_misfit : bool
         Scale the residual part of σ_d², σ_e² by the residual's pooled autocorrelation (the
         sandwich with C(δ) instead of a white σ²; :func:`~.misfit.correlation_factor`). Off: on
@@ -137,7 +139,6 @@ class MatchConfig:
     correlated_misfit: bool = False
     typical_misfit: float = 6.0
     typical_normalized: float = 0.02
-    floor_after_blur: bool = False
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

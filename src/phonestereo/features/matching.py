@@ -161,7 +161,7 @@ def match_rectified(
     idx = np.flatnonzero(_search_tests(s, cfg, counts))
     if not len(idx):
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
-    added, shift_noise = (0.0, 0.0), noise
+    added, shift_noise, noise_in = (0.0, 0.0), noise, noise
     if cfg.equalise_blur:  # after the search: its windows tell the pair's relative blur
         eq = equalise_pair(
             lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise, min_misfit=cfg.min_blur_misfit
@@ -188,11 +188,17 @@ def match_rectified(
     if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
         k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
+        noise_in = (noise_in[0] * k, noise_in[1] * k)
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
-    # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
-    floor = nfloor = 1.0  # not after blur equalisation: that models the pair's misfit already
-    if cfg.misfit_floor and (added == (0.0, 0.0) or cfg.floor_after_blur):
-        floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
+    # the pair's own misfit, in units of its input noise model: blur equalisation lowers the
+    # computed noise of the blurred image, not the misfit a clean pair shows (rectification,
+    # surfaces, interpolation), so `typical_misfit` keeps its meaning with or without it; a
+    # pair whose blur difference the equalisation explains reads ≤ 1 (no floor), an ISP's
+    # misfit beyond it raises the floor either way (features/misfit.py)
+    floor = nfloor = 1.0
+    if cfg.misfit_floor:
+        input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
+        floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
         nfloor = misfit_floor(
             ref.residual_var[ok], ref.template_std[ok] ** 2, typical=cfg.typical_normalized
         )

@@ -300,12 +300,6 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "The same for the normalised residual s² / window variance.",
             "0.02: clean 0.014 (Adirondack), 0.029 (motorcycle); JPEG q85 0.073.",
         ),
-        "floor_after_blur": (
-            "bool",
-            "Also apply the misfit floors after blur equalisation.",
-            "Off: on the motorcycle with one image blurred by 0.7-1 px it raises the median "
-            "error 1.2-1.4×; real phone pairs need it on (0-22 matches per pair without).",
-        ),
     },
 }
 
