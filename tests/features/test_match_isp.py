@@ -95,9 +95,15 @@ def test_sigma_honest_on_isp_renders(setting: str, slant: float) -> None:
     assert 0.58 <= out["within_1_sigma"] <= 0.78, out
 
 
-@pytest.mark.skipif(not phone.DATA.exists(), reason="shared/data not beside the clone")
-def test_real_phone_pairs() -> None:
-    rows = [phone.evaluate(w, t) for _, w, t in phone.pairs()]
+@pytest.fixture(scope="module")
+def phone_rows() -> list[dict]:
+    if not phone.DATA.exists():
+        pytest.skip("shared/data not beside the clone")
+    return [phone.evaluate(w, t) for _, w, t in phone.pairs()]
+
+
+def test_real_phone_pairs(phone_rows: list[dict]) -> None:
+    rows = phone_rows
     assert len(rows) == 16
     n100 = sum(r["matches"] >= 100 for r in rows)
     # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured with the default MatchConfig
@@ -107,7 +113,20 @@ def test_real_phone_pairs() -> None:
     # the rows line up to within the third party's calibration: measured median |e| 0.2–2.0 px
     assert all(r["median_abs_e_px"] < 3.0 for r in rows), [r["median_abs_e_px"] for r in rows]
     z = np.array([r["rms_z"] for r in rows])
-    # left→right vs right→left RMS z: acceptance 0.8–1.25; measured 0.43–3.2 (median 1.26):
-    # below 1 where the rows line up (Roll, |e| ≈ 0.2 px), 2–3 where they are 1.5–2 px off
-    # (Forward): not met per pair, guard the median
-    assert 0.8 <= float(np.nanmedian(z)) <= 2.0, z
+    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.48–0.90 (median
+    # 0.67) on 36–131 paired matches per pair. (Before the pairing used y' + e instead of
+    # y' − e: only the matches with |e| < 0.5 px paired on pairs whose rows are 1.5–2 px off,
+    # mostly wrong ones, and RMS z read 2–3 there.) The upper bound holds on every pair
+    assert np.all(z <= 1.25), z
+    assert np.all(z >= 0.4), z
+
+
+# LR and RL fit the same pixels, so the misfit both see is common and cancels in d_LR − d_RL:
+# on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
+# are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
+# 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
+# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16 pairs below 0.8)
+@pytest.mark.xfail(strict=True, reason="RMS z 0.48–0.90 per pair: common ISP misfit cancels")
+def test_real_phone_pairs_consistency_lower_bound(phone_rows: list[dict]) -> None:
+    z = np.array([r["rms_z"] for r in phone_rows])
+    assert np.all(z >= 0.8), z
