@@ -125,7 +125,8 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
 # on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
 # are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
 # 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
-# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16 pairs below 0.8)
+# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16
+# pairs below 0.8)
 @pytest.mark.xfail(strict=True, reason="RMS z 0.48–0.90 per pair: common ISP misfit cancels")
 def test_real_phone_pairs_consistency_lower_bound(phone_rows: list[dict]) -> None:
     z = np.array([r["rms_z"] for r in phone_rows])
