@@ -41,7 +41,12 @@ from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
-from phonestereo.features.misfit import correlation_factor, misfit_floor, residual_correlation
+from phonestereo.features.misfit import (
+    correlation_factor,
+    misfit_floor,
+    misfit_tail,
+    residual_correlation,
+)
 from phonestereo.features.search import SearchResult, ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 
@@ -195,15 +200,18 @@ def match_rectified(
     # surfaces, interpolation), so `typical_misfit` keeps its meaning with or without it; a
     # pair whose blur difference the equalisation explains reads ≤ 1 (no floor), an ISP's
     # misfit beyond it raises the floor either way (features/misfit.py)
-    floor = nfloor = 1.0
+    floor, nbound = 1.0, cfg.max_normalized_residual**2
     if cfg.misfit_floor:
         input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
         floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
-        nfloor = misfit_floor(
-            ref.residual_var[ok], ref.template_std[ok] ** 2, typical=cfg.typical_normalized
-        )
+        # the normalised residual's bound: the upper tail of the pair's own windows
+        with np.errstate(invalid="ignore", divide="ignore"):
+            tail = misfit_tail(
+                ref.residual_var[ok] / ref.template_std[ok] ** 2, k=cfg.normalized_tail
+            )
+        nbound = max(nbound, tail) if np.isfinite(tail) else nbound
     with np.errstate(invalid="ignore"):
-        ok &= ref.residual_var <= nfloor * (cfg.max_normalized_residual * ref.template_std) ** 2
+        ok &= ref.residual_var <= nbound * ref.template_std**2
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None
