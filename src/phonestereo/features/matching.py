@@ -204,11 +204,12 @@ def match_rectified(
     if cfg.misfit_floor:
         input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
         floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
-        # the normalised residual's bound: the upper tail of the pair's own windows
+        # the normalised residual's bound: raised by the pair's typical value, and to the
+        # upper tail of its own windows where their spread is wider (one-sided processing)
         with np.errstate(invalid="ignore", divide="ignore"):
-            tail = misfit_tail(
-                ref.residual_var[ok] / ref.template_std[ok] ** 2, k=cfg.normalized_tail
-            )
+            ratio = ref.residual_var[ok] / ref.template_std[ok] ** 2
+        nbound *= misfit_floor(ratio, np.ones(len(ratio)), typical=cfg.typical_normalized)
+        tail = misfit_tail(ratio, k=cfg.normalized_tail)
         nbound = max(nbound, tail) if np.isfinite(tail) else nbound
     with np.errstate(invalid="ignore"):
         ok &= ref.residual_var <= nbound * ref.template_std**2

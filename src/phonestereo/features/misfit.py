@@ -11,11 +11,12 @@ smoothed noise). Two things are therefore measured on the pair's own converged w
   rejects a window that fits much worse than the pair's typical window, not one that fits worse
   than the sensor noise alone would allow (:func:`misfit_floor`). ``typical`` is what clean real
   pairs already show (2–6 noise variances), so on them nothing changes; JPEG q85 reads 52. The
-  normalised residual s² / window variance (≈ 1 − ZNCC²) is bounded by the upper tail of the
-  pair's own windows, median + 2·σ_MAD (:func:`misfit_tail`), never below the clean bound: its
-  typical value rises from 0.014 (clean) to 0.07 (q85) because compression removes low-contrast
-  detail, and a one-sided denoiser widens its spread (0.005–0.19 between the 10th and 90th
-  percentiles on Adirondack) without the high-ratio windows' disparities being worse.
+  same is done for the normalised residual s² / window variance (≈ 1 − ZNCC²), whose typical
+  value rises from 0.014 (clean) to 0.07 (q85) because compression removes low-contrast detail;
+  its bound is also raised to the upper tail of the pair's own windows, median + 2·σ_MAD
+  (:func:`misfit_tail`), where a one-sided denoiser widens the spread (0.005–0.19 between the
+  10th and 90th percentiles on Adirondack) without the high-ratio windows' disparities being
+  worse.
 * **the residual autocorrelation** ρ(δ) at lags |δx|, |δy| ≤ 3 px, pooled over the windows
   (:func:`residual_correlation`). For a window of influence image G (d̂ − d = Σ_p G(p) n(p),
   from :func:`~phonestereo.features.subpixel.refine_lk`) the variance of d̂ under a residual of

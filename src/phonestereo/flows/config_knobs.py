@@ -295,10 +295,15 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "max(1, median / this).",
             "6: clean real pairs measure 2.0 (Middlebury-Q) and 5.7 (motorcycle).",
         ),
+        "typical_normalized": (
+            "fraction of window variance",
+            "The same for the normalised residual s² / window variance.",
+            "0.02: clean 0.014 (Adirondack), 0.029 (motorcycle); JPEG q85 0.073.",
+        ),
         "normalized_tail": (
             "σ_MAD",
-            "The normalised residual's bound is raised to median + this × σ_MAD of the pair's "
-            "own windows (never below max_normalized_residual²).",
+            "The normalised residual's bound is also raised to median + this × σ_MAD of the "
+            "pair's own windows where that is larger.",
             "2: clean pairs stay at 0.04 (Adirondack unchanged); denoised Adirondack keeps "
             "415 matches instead of 311, Piano JPEG q85 517 instead of 443.",
         ),
