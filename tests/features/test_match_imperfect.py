@@ -28,7 +28,9 @@ def aligned() -> dict[str, dict]:
 # take the row offset (dy = 1 px alone: 1.00×); the roll's disparity gradient along y is the
 # fitted slant. With one image resampled bilinearly instead (order 1) the medians read 1.9–2.0×
 # (Adirondack) and 1.45× (Piano): the interpolation's own bias at fractional offsets, not the
-# matcher's (cubic B-spline: 1.07–1.18×)
+# matcher's (cubic B-spline: 1.07–1.18×). OpenCV's remap of the 0.1° roll alone: INTER_LINEAR
+# 1.95× (signed +0.028 px against +0.001 aligned), INTER_CUBIC 1.16×, INTER_LANCZOS4 1.05×
+# (Adirondack): the product's rectification remaps bilinearly by default
 @needs_data
 @pytest.mark.parametrize("scene", imp.SCENES)
 @pytest.mark.parametrize(("dy_px", "roll_deg"), imp.CASES)

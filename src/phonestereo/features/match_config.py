@@ -76,7 +76,7 @@ class MatchConfig:
         typical window, not worse than sensor noise alone would allow. JPEG, sharpening and
         denoising lower the image's noise estimate and add misfit: without the floor the
         residual tests removed 55–100 % of the windows (Adirondack JPEG q85: 14 matches of 883
-        clean; with it 702).
+        clean; with it 728).
     typical_misfit : float
         The median window residual (in noise variances σ_L² + a²σ_R²) that a pair without
         ISP processing already shows and that does not raise the floor: clean real pairs

@@ -281,7 +281,7 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "Test window residuals against the pair's own typical misfit "
             "(features/misfit.py), not against sensor noise alone.",
             "On: JPEG, sharpening and denoising add misfit the noise estimate misses; "
-            "without the floor Adirondack JPEG q85 kept 14 of 883 matches, with it 702.",
+            "without the floor Adirondack JPEG q85 kept 14 of 883 matches, with it 728.",
         ),
         "correlated_misfit": (
             "bool",
