@@ -259,7 +259,7 @@ class Rectification:
         return self._maps("tele", step)
 
     def remap(
-        self, image_wide: Any, image_tele: Any, *, interpolation: str = "linear"
+        self, image_wide: Any, image_tele: Any, *, interpolation: str = maps.DEFAULT_INTERPOLATION
     ) -> tuple[NDArray[Any], NDArray[Any]]:
         """Rectify an image pair → (wide_rect, tele_rect), each (H', W'[, C]).
 
