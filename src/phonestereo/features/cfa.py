@@ -60,7 +60,7 @@ def cfa_phase_contrast(image: F32) -> float:
     float
         0 for an image with no grid-locked structure; measured 0.01–0.02 on Middlebury-Q (clean
         or JPEG), 0.54–1.03 on ISP renders (OpenCV EA demosaic), 0.63–0.67 on Middlebury-Q
-        re-mosaiced and demosaiced; NaN for an image under 8 px a side.
+        re-mosaiced and demosaiced; NaN for an image under 8 px a side, 0 for a flat one.
 
     Examples
     --------
@@ -77,9 +77,9 @@ def cfa_phase_contrast(image: F32) -> float:
         return float("nan")
     r = np.abs(cv2.filter2D(img, -1, _LAPLACE, borderType=cv2.BORDER_REFLECT_101))
     e = np.array([r[i::2, j::2][1:-1, 1:-1].mean() for i in (0, 1) for j in (0, 1)])
-    if not e.min() > 0:
+    if not e.max() > 0:  # flat image
         return 0.0
-    return float(e.max() / e.min() - 1.0)
+    return float(e.max() / e.min() - 1.0) if e.min() > 0 else float("inf")
 
 
 def _kernel_gain(taps: F64) -> float:
