@@ -9,7 +9,10 @@ with :func:`phonestereo.features.matching.match_rectified` both ways. Reported: 
 the median |e| (row error after rectification, px) and the left→right vs right→left
 consistency: the pair is matched again with the images swapped and mirrored (x → W − 1 − x keeps
 d > 0), matches are paired by position (same left pixel within 1 px: the mirrored right point
-x − d), and RMS of (d_LR − d_RL) / √(σ_LR² + σ_RL²) is reported (≈ 1 for honest σ).
+x − d, row y − e), and RMS of (d_LR − d_RL) / √(σ_LR² + σ_RL²) is reported. It is ≈ 1 for
+honest σ only when the two directions' errors are independent: both fit the same pixels, so a
+misfit common to both (compression, denoising, the ISP's) cancels and the figure reads low
+(Middlebury JPEG q85: 0.58–0.83 while σ_d is too small against the ground truth).
 
 ``benchmarks/bench_match_phone.py`` prints the per-pair table.
 """
@@ -32,10 +35,9 @@ from phonestereo.rectification.rectify import Rectification
 
 DATA = SHARED_DATA / "phone_wide_ultra"
 SIZE = (480, 424)
-#: the misfit floor also after blur equalisation: the phone's tele, downscaled to the wide's
-#: scale, is sharper and gets blurred, and the computed noise of the blurred image (white-noise
-#: model) is far below the ISP's correlated misfit (floors 16–74 noise variances measured)
-CONFIG = MatchConfig(floor_after_blur=True)
+#: the product's default matcher (the misfit floor, measured in units of the pair's input noise,
+#: holds after the blur equalisation that the phone's sharper tele triggers)
+CONFIG = MatchConfig()
 MAX_DISPARITY = 64  # px at the wide's rectified scale: 1 m at f ≈ 390 px, B ≈ 1.9 cm gives 7.5
 
 
@@ -69,8 +71,9 @@ def consistency(left: np.ndarray, right: np.ndarray) -> dict[str, Any]:
     w = left.shape[1]
     # right→left: the right image is the new left; mirrored, so that d stays positive
     rl = match_rectified(right[:, ::-1], left[:, ::-1], max_disparity=MAX_DISPARITY, config=CONFIG)
-    # a right→left match at mirrored (x', y) is the left point x = W − 1 − x' + d
-    back = np.column_stack([w - 1 - rl.xy[:, 0] + rl.d, rl.xy[:, 1] + rl.e])
+    # a right→left match at mirrored (x', y') of the right image is the left point
+    # (W − 1 − x' + d, y' − e): its e = y_right − y_left (the images swapped)
+    back = np.column_stack([w - 1 - rl.xy[:, 0] + rl.d, rl.xy[:, 1] - rl.e])
     z = np.full(0, np.nan)
     if len(lr) and len(rl):
         dist, j = cKDTree(back).query(lr.xy, distance_upper_bound=1.0)

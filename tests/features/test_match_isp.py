@@ -18,17 +18,24 @@ needs_data = pytest.mark.skipif(
     not isp.bench.DATA.exists(), reason="shared/data not beside the clone"
 )
 
-# measured (matches, median |d − GT| px): clean Adirondack 883, 0.0188; Piano 641, 0.0670;
-# motorcycle 565, 0.0725. Passing cases measured: Adirondack q95 742 (84 %) 0.0241, sharpened
-# 840 (95 %) 0.0200; Piano q95 548 (85 %) 0.0664, sharpened 522 (81 %) 0.0645; motorcycle q95
-# 580 0.0728, q85 609 0.0859, q70 603 0.0926, sharpened 397 (70.3 %) 0.0710, denoised 556 0.0742
+# measured (matches, median |d − GT| px): clean Adirondack 883, 0.0188; Piano 663, 0.0673;
+# motorcycle 605, 0.0727. Passing cases measured: Adirondack q95 771 (87 %) 0.0242, sharpened
+# 845 (96 %) 0.0200; Piano q95 579 (87 %) 0.0666, q85 517 (78 %) 0.0791, sharpened 549 (83 %)
+# 0.0644; motorcycle q95 618 0.0735, q85 645 0.0857, q70 628 0.0925, sharpened 530 (88 %)
+# 0.0728, denoised 594 (98 %) 0.0755. The misses below are limited upstream of the residual
+# tests: a one-sided denoiser wipes the low-contrast texture of the right image, so NCC
+# uniqueness (Adirondack 1192 → 844 of the searched keypoints) and the sub-pixel convergence
+# (796 → 536 within 10 iterations: the left's gradients no longer match the right's) lose
+# them. JPEG's medians are information-limited at this window: the quantisation error is the
+# windows' residual (Adirondack median σ_d 0.0178 → 0.0408 / 0.0514 px at q85 / q70, 2.3 /
+# 2.9×, as the median error 2.2 / 3.2×); the best 50 % of the q70 matches by σ_d still read
+# 0.048 px, a symmetric 0.5 px prefilter 0.055, a 19 × 19 window 0.049 and a 23 × 23 one 0.043
 MISSES = {
-    ("Adirondack", "jpeg85"): "702 matches (80 %) but median 0.0410 px > 0.0388",
-    ("Adirondack", "jpeg70"): "644 matches (73 %) but median 0.0611 px > 0.0388",
-    ("Adirondack", "denoised"): "keeps 35 % (311 of 883; 133 before), median 0.0370 px",
-    ("Piano", "jpeg85"): "keeps 69 % (443 of 641), median 0.0809 px",
-    ("Piano", "jpeg70"): "407 matches (63 %) but median 0.118 px > 0.1005",
-    ("Piano", "denoised"): "keeps 57 % (363 of 641), median 0.0745 px",
+    ("Adirondack", "jpeg85"): "728 matches (82 %) but median 0.0410 px > 0.0388",
+    ("Adirondack", "jpeg70"): "675 matches (76 %) but median 0.0613 px > 0.0388",
+    ("Adirondack", "denoised"): "keeps 47 % (415 of 883), median 0.0343 px",
+    ("Piano", "jpeg70"): "452 matches (68 %) but median 0.1205 px > 0.1010",
+    ("Piano", "denoised"): "keeps 60 % (398 of 663), median 0.0738 px",
 }
 PARAMS = [
     pytest.param(s, c, marks=pytest.mark.xfail(strict=True, reason=MISSES[(s, c)]))
@@ -86,17 +93,39 @@ def test_sigma_honest_on_isp_renders(setting: str, slant: float) -> None:
     assert 0.58 <= out["within_1_sigma"] <= 0.78, out
 
 
-@pytest.mark.skipif(not phone.DATA.exists(), reason="shared/data not beside the clone")
-def test_real_phone_pairs() -> None:
-    rows = [phone.evaluate(w, t) for _, w, t in phone.pairs()]
+@pytest.fixture(scope="module")
+def phone_rows() -> list[dict]:
+    if not phone.DATA.exists():
+        pytest.skip("shared/data not beside the clone")
+    return [phone.evaluate(w, t) for _, w, t in phone.pairs()]
+
+
+def test_real_phone_pairs(phone_rows: list[dict]) -> None:
+    rows = phone_rows
     assert len(rows) == 16
     n100 = sum(r["matches"] >= 100 for r in rows)
-    # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured 102–253 on 16 of 16
+    # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured with the default MatchConfig
+    # (the misfit floor in input-noise units, also after blur equalisation) 94–252, ≥ 100 on
+    # 15 of 16 (0–22 per pair when the floor was skipped after equalisation)
     assert n100 >= 0.8 * len(rows), [r["matches"] for r in rows]
     # the rows line up to within the third party's calibration: measured median |e| 0.2–2.0 px
     assert all(r["median_abs_e_px"] < 3.0 for r in rows), [r["median_abs_e_px"] for r in rows]
     z = np.array([r["rms_z"] for r in rows])
-    # left→right vs right→left RMS z: acceptance 0.8–1.25; measured 0.42–3.2 (median 1.38):
-    # below 1 where the rows line up (Roll, |e| ≈ 0.2 px), 2–3 where they are 1.5–2 px off
-    # (Forward): not met per pair, guard the median
-    assert 0.8 <= float(np.nanmedian(z)) <= 2.0, z
+    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.47–0.92 (median
+    # 0.65) on 40–151 paired matches per pair. (Before the pairing used y' + e instead of
+    # y' − e: only the matches with |e| < 0.5 px paired on pairs whose rows are 1.5–2 px off,
+    # mostly wrong ones, and RMS z read 2–3 there.) The upper bound holds on every pair
+    assert np.all(z <= 1.25), z
+    assert np.all(z >= 0.4), z
+
+
+# LR and RL fit the same pixels, so the misfit both see is common and cancels in d_LR − d_RL:
+# on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
+# are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
+# 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
+# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16
+# pairs below 0.8)
+@pytest.mark.xfail(strict=True, reason="RMS z 0.47–0.92 per pair: common ISP misfit cancels")
+def test_real_phone_pairs_consistency_lower_bound(phone_rows: list[dict]) -> None:
+    z = np.array([r["rms_z"] for r in phone_rows])
+    assert np.all(z >= 0.8), z

@@ -20,6 +20,10 @@ from phonestereo.geometry import LENS_MODELS, Rig
 from phonestereo.io import Calibration, save_calibration
 from phonestereo.report.calibration_plots import write_residual_plots
 
+# A chessboard cannot tell a distortion centre from the principal point and p1, p2 (they trade
+# against each other to first order), so radial-odd-centred is for imported tables only.
+FIT_MODELS = tuple(m for m in LENS_MODELS if m != "radial-odd-centred")
+
 
 @app.command()
 def calibrate(
@@ -36,7 +40,7 @@ def calibrate(
             help="Quoted glob of tele images: stereo calibration, pairs matched by sorted name."
         ),
     ] = None,
-    model: Annotated[str, typer.Option(help=f"Lens model: {', '.join(LENS_MODELS)}.")] = "opencv5",
+    model: Annotated[str, typer.Option(help=f"Lens model: {', '.join(FIT_MODELS)}.")] = "opencv5",
     reject_outliers: Annotated[
         bool,
         typer.Option(
@@ -62,8 +66,8 @@ def calibrate(
     points at the lens model, the board or the images (blur, rolling shutter), not at noise.
     """
     console = Console(stderr=True)
-    if model not in LENS_MODELS:
-        raise typer.BadParameter(f"unknown model '{model}'; choose one of {sorted(LENS_MODELS)}")
+    if model not in FIT_MODELS:
+        raise typer.BadParameter(f"unknown model '{model}'; choose one of {sorted(FIT_MODELS)}")
     try:
         pattern = parse_board(board)
         with Progress(console=console, transient=True, disable=as_json) as bar:

@@ -87,7 +87,7 @@ def import_apple_command(
     """Import an Apple AVFoundation dump (docs/import-apple.md).
 
     Converts each camera's AVCameraCalibrationData into calibration.json (the distortion
-    lookup table fitted by the radial-odd lens, residual reported) and each capture into
+    lookup table fitted by the radial-odd-centred lens, residual reported) and each capture into
     manifest.json.
 
     Example: phonestereo import apple iphone_dump --out runs/iphone_set

@@ -44,7 +44,12 @@ from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
-from phonestereo.features.misfit import correlation_factor, misfit_floor, residual_correlation
+from phonestereo.features.misfit import (
+    correlation_factor,
+    misfit_floor,
+    misfit_tail,
+    residual_correlation,
+)
 from phonestereo.features.search import SearchResult, ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
 
@@ -164,7 +169,7 @@ def match_rectified(
     idx = np.flatnonzero(_search_tests(s, cfg, counts))
     if not len(idx):
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
-    added, shift_noise = (0.0, 0.0), noise
+    added, shift_noise, noise_in = (0.0, 0.0), noise, noise
     if cfg.equalise_blur:  # after the search: its windows tell the pair's relative blur
         eq = equalise_pair(
             lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise, min_misfit=cfg.min_blur_misfit
@@ -173,7 +178,7 @@ def match_rectified(
     cfa = cfg.cfa_filter and all(cfa_phase_contrast(im) >= cfg.min_cfa for im in (lc, rc))
     if cfa:  # both on their sensor grids: the CFA carriers would pull d to even values
         lc, rc, pf, sf = suppress_cfa(lc, rc, noise)
-        noise = (noise[0] * pf, noise[1] * pf)
+        noise, noise_in = (noise[0] * pf, noise[1] * pf), (noise_in[0] * pf, noise_in[1] * pf)
         shift_noise = (shift_noise[0] * sf[0], shift_noise[1] * sf[1])
     ref = refine_lk(
         lc,
@@ -196,16 +201,26 @@ def match_rectified(
     if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
         k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
         noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
+        noise_in = (noise_in[0] * k, noise_in[1] * k)
     noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
-    # the pair's own misfit: typical residual (ISP, compression) and its autocorrelation
-    floor = nfloor = 1.0  # not after blur equalisation: that models the pair's misfit already
-    if cfg.misfit_floor and (added == (0.0, 0.0) or cfg.floor_after_blur):
-        floor = misfit_floor(ref.residual_var[ok], noise_var[ok], typical=cfg.typical_misfit)
-        nfloor = misfit_floor(
-            ref.residual_var[ok], ref.template_std[ok] ** 2, typical=cfg.typical_normalized
-        )
+    # the pair's own misfit, in units of its input noise model: blur equalisation lowers the
+    # computed noise of the blurred image, not the misfit a clean pair shows (rectification,
+    # surfaces, interpolation), so `typical_misfit` keeps its meaning with or without it; a
+    # pair whose blur difference the equalisation explains reads ≤ 1 (no floor), an ISP's
+    # misfit beyond it raises the floor either way (features/misfit.py)
+    floor, nbound = 1.0, cfg.max_normalized_residual**2
+    if cfg.misfit_floor:
+        input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
+        floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
+        # the normalised residual's bound: raised by the pair's typical value, and to the
+        # upper tail of its own windows where their spread is wider (one-sided processing)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = ref.residual_var[ok] / ref.template_std[ok] ** 2
+        nbound *= misfit_floor(ratio, np.ones(len(ratio)), typical=cfg.typical_normalized)
+        tail = misfit_tail(ratio, k=cfg.normalized_tail)
+        nbound = max(nbound, tail) if np.isfinite(tail) else nbound
     with np.errstate(invalid="ignore"):
-        ok &= ref.residual_var <= nfloor * (cfg.max_normalized_residual * ref.template_std) ** 2
+        ok &= ref.residual_var <= nbound * ref.template_std**2
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None

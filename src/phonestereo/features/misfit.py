@@ -12,7 +12,11 @@ smoothed noise). Two things are therefore measured on the pair's own converged w
   than the sensor noise alone would allow (:func:`misfit_floor`). ``typical`` is what clean real
   pairs already show (2–6 noise variances), so on them nothing changes; JPEG q85 reads 52. The
   same is done for the normalised residual s² / window variance (≈ 1 − ZNCC²), whose typical
-  value rises from 0.014 (clean) to 0.07 (q85) because compression removes low-contrast detail.
+  value rises from 0.014 (clean) to 0.07 (q85) because compression removes low-contrast detail;
+  its bound is also raised to the upper tail of the pair's own windows, median + 2·σ_MAD
+  (:func:`misfit_tail`), where a one-sided denoiser widens the spread (0.005–0.19 between the
+  10th and 90th percentiles on Adirondack) without the high-ratio windows' disparities being
+  worse.
 * **the residual autocorrelation** ρ(δ) at lags |δx|, |δy| ≤ 3 px, pooled over the windows
   (:func:`residual_correlation`). For a window of influence image G (d̂ − d = Σ_p G(p) n(p),
   from :func:`~phonestereo.features.subpixel.refine_lk`) the variance of d̂ under a residual of
@@ -26,12 +30,12 @@ smoothed noise). Two things are therefore measured on the pair's own converged w
 
 Both are computed with FFTs of the small window images (NumPy), a few ms for 2000 windows.
 
-Measured (benchmarks/bench_match_isp.py): the floor keeps 80 / 73 % of Adirondack's matches
-at JPEG q85 / q70 (14 / 0 before) and the sharpened pair's 95 % (0 before). The correlation
-factor is 0.9–1.4 on JPEG and ISP renders and changes no figure there; on a relative blur it
-reads the deterministic even misfit (which does not move d) as correlated noise and over-states
-σ_d (within σ 0.83–0.87), so the matcher leaves it off by default
-(``MatchConfig.correlated_misfit``).
+Measured (benchmarks/bench_match_isp.py): the floor and the tail keep 82 / 76 % of
+Adirondack's matches at JPEG q85 / q70 (14 / 0 before) and the sharpened pair's 96 % (0
+before). The correlation factor is 0.9–1.4 on JPEG and ISP renders and changes no figure
+there; on a relative blur it reads the deterministic even misfit (which does not move d) as
+correlated noise and over-states σ_d (within σ 0.83–0.87), so the matcher leaves it off by
+default (``MatchConfig.correlated_misfit``).
 """
 
 from __future__ import annotations
@@ -77,6 +81,26 @@ def misfit_floor(residual_var: F64, model_var: F64, *, typical: float = 1.0) -> 
     if not len(ratio):
         return 1.0
     return max(1.0, float(np.median(ratio)) / float(typical))
+
+
+def misfit_tail(ratio: F64, *, k: float = 2.0) -> float:
+    """median + k·σ_MAD of the finite ``ratio`` values (σ_MAD = 1.4826 · MAD); NaN if none.
+
+    The upper tail of the pair's own distribution of a window statistic: a window beyond it
+    fits much worse than the pair's windows do, whatever the pair's processing. Used for the
+    normalised residual s² / window variance, whose spread a one-sided denoiser or JPEG widens
+    (the low-contrast windows lose their texture on one side only) without the windows'
+    disparity getting worse.
+
+    >>> round(misfit_tail(np.array([0.01, 0.02, 0.02, 0.03, 0.5])), 4)   # 0.02 + 2·1.4826·0.01
+    0.0497
+    """
+    r = np.asarray(ratio, np.float64)
+    r = r[np.isfinite(r)]
+    if not len(r):
+        return float("nan")
+    med = float(np.median(r))
+    return med + float(k) * 1.4826 * float(np.median(np.abs(r - med)))
 
 
 def _size(m: int) -> int:

@@ -281,7 +281,7 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "Test window residuals against the pair's own typical misfit "
             "(features/misfit.py), not against sensor noise alone.",
             "On: JPEG, sharpening and denoising add misfit the noise estimate misses; "
-            "without the floor Adirondack JPEG q85 kept 14 of 883 matches, with it 702.",
+            "without the floor Adirondack JPEG q85 kept 14 of 883 matches, with it 728.",
         ),
         "correlated_misfit": (
             "bool",
@@ -300,11 +300,12 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "The same for the normalised residual s² / window variance.",
             "0.02: clean 0.014 (Adirondack), 0.029 (motorcycle); JPEG q85 0.073.",
         ),
-        "floor_after_blur": (
-            "bool",
-            "Also apply the misfit floors after blur equalisation.",
-            "Off: on the motorcycle with one image blurred by 0.7-1 px it raises the median "
-            "error 1.2-1.4×; real phone pairs need it on (0-22 matches per pair without).",
+        "normalized_tail": (
+            "σ_MAD",
+            "The normalised residual's bound is also raised to median + this × σ_MAD of the "
+            "pair's own windows where that is larger.",
+            "2: clean pairs stay at 0.04 (Adirondack unchanged); denoised Adirondack keeps "
+            "415 matches instead of 311, Piano JPEG q85 517 instead of 443.",
         ),
         "cfa_filter": (
             "bool",

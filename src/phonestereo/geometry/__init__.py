@@ -15,6 +15,7 @@ from phonestereo.geometry.lens_models import (
     OpenCV5,
     OpenCV8,
     RadialOdd,
+    RadialOddCentred,
     lens_from_dict,
     make_lens,
 )
@@ -34,6 +35,7 @@ __all__ = [
     "OpenCV5",
     "OpenCV8",
     "RadialOdd",
+    "RadialOddCentred",
     "Rig",
     "Transform",
     "depth_from_disparity",

@@ -124,7 +124,7 @@ def rotate_lens(lens: LensModel, k: int) -> LensModel:
 
     With Q the 2×2 block of :func:`quarter_turn`, ``rotate_lens(lens, k).distort(Q u) =
     Q · lens.distort(u)``: radial terms are unchanged and the tangential vector (p2, p1) turns
-    with Q.
+    with Q, as does a distortion centre (``radial-odd-centred``).
 
     Examples
     --------
@@ -138,6 +138,11 @@ def rotate_lens(lens: LensModel, k: int) -> LensModel:
     coeffs = list(lens.coefficients)
     p2, p1 = quarter_turn(k)[:2, :2] @ [coeffs[i2], coeffs[i1]]
     coeffs[i1], coeffs[i2] = float(p1), float(p2)
+    centre = getattr(lens, "centre_columns", None)  # a distortion centre turns with the image
+    if centre is not None:
+        j1, j2 = centre
+        cx, cy = quarter_turn(k)[:2, :2] @ [coeffs[j1], coeffs[j2]]
+        coeffs[j1], coeffs[j2] = float(cx), float(cy)
     return lens.with_coefficients(coeffs)
 
 

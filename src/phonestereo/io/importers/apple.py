@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.io.calibration import Calibration, CalibrationConditions
-from phonestereo.io.importers.apple_lut import fit_radial_odd, inverse_consistency
+from phonestereo.io.importers.apple_lut import fit_radial_odd_centred, inverse_consistency
 from phonestereo.io.importers.apple_schema import AppleCalibration, AppleCapture, AppleSession
 from phonestereo.io.importers.common import (
     ImportResult,
@@ -106,11 +106,11 @@ def output_camera(
             "photo uncropped (or crop the dump's calibration to match)"
         )
     center = (cal.lensDistortionCenter.x, cal.lensDistortionCenter.y)
-    lens, fit_px = fit_radial_odd(K_ref, center, cal.lensDistortionLookupTable, ref)
+    lens, fit_px = fit_radial_odd_centred(K_ref, center, cal.lensDistortionLookupTable, ref)
     inv_px = inverse_consistency(center, cal.lensDistortionLookupTable,
                                  cal.inverseLensDistortionLookupTable, ref)
     notes.append(
-        f"{camera}: lookup table fitted by radial-odd to {fit_px * sx:.4f} px (max, image "
+        f"{camera}: lookup table fitted by radial-odd-centred to {fit_px * sx:.4f} px (max, image "
         f"pixels); inverse table agrees to {inv_px * sx:.3f} px; focal length "
         f"{K_ref[0, 0] * cal.pixelSize:.3f} mm"
     )
