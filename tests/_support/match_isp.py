@@ -177,11 +177,13 @@ def isp_honesty(setting: str, tilt: tuple[float, float, float], seed: int = 0) -
     left, right, d_true = isp_pair([(16.3, tilt, (0.0, 0.0))], ISP_SETTINGS[setting], seed=seed)
     res = match_rectified(left, right, max_disparity=32)
     xi = np.rint(res.xy).astype(int)
-    err = np.abs(res.d - d_true[xi[:, 1], xi[:, 0]])
+    signed = res.d - d_true[xi[:, 1], xi[:, 0]]
+    err = np.abs(signed)
     return {
         "setting": setting,
         "tilt": tilt,
         "matches": len(res),
+        "median_err_px": float(np.median(signed)) if len(err) else float("nan"),
         "median_abs_err_px": float(np.median(err)) if len(err) else float("nan"),
         "within_1_sigma": float(np.mean(err <= res.sigma_d)) if len(err) else float("nan"),
         "median_sigma_d_px": float(np.median(res.sigma_d)) if len(err) else float("nan"),

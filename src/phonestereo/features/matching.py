@@ -8,7 +8,9 @@ Stages (each counted in :attr:`MatchResult.counts`):
    uniqueness, convexity and left–right consistency (:mod:`~phonestereo.features.search`);
 3. **sub-pixel** — the sharper image is blurred to the other's blur when the NCC matches show a
    difference that would misfit the windows beyond the noise (:mod:`~phonestereo.features.blur`;
-   a symmetric Gaussian does not move the peak); then 2-D Lucas–Kanade (d, e, gain, offset,
+   a symmetric Gaussian does not move the peak); both images are filtered by [1, 2, 1] / 4 when
+   both still carry a demosaicer's CFA phase, which would pull d toward even disparities
+   (:mod:`~phonestereo.features.cfa`); then 2-D Lucas–Kanade (d, e, gain, offset,
    disparity gradient) on a cubic B-spline: no pixel locking
    (:mod:`~phonestereo.features.subpixel`); it must converge near the NCC peak, fit to within
    the noise and not be ill-conditioned;
@@ -37,6 +39,7 @@ from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
 from phonestereo.features._threads import background
 from phonestereo.features.blur import equalise_pair
+from phonestereo.features.cfa import cfa_phase_contrast, suppress_cfa
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
@@ -172,10 +175,15 @@ def match_rectified(
             lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise, min_misfit=cfg.min_blur_misfit
         )
         lc, rc, added, noise, shift_noise = eq.left, eq.right, eq.added, eq.noise, eq.shift_noise
+    cfa = cfg.cfa_filter and all(cfa_phase_contrast(im) >= cfg.min_cfa for im in (lc, rc))
+    if cfa:  # both on their sensor grids: the CFA carriers would pull d to even values
+        lc, rc, pf, sf = suppress_cfa(lc, rc, noise)
+        noise, noise_in = (noise[0] * pf, noise[1] * pf), (noise_in[0] * pf, noise_in[1] * pf)
+        shift_noise = (shift_noise[0] * sf[0], shift_noise[1] * sf[1])
     ref = refine_lk(
         lc,
         None,  # the template gradients are filtered from the left windows directly
-        right_prep.result()[1] if added[1] == 0 else bspline_coefficients(rc),
+        right_prep.result()[1] if added[1] == 0 and not cfa else bspline_coefficients(rc),
         xy[idx],
         s.d0[idx],
         s.e0[idx],
@@ -251,6 +259,7 @@ def match_rectified(
         seconds=time.perf_counter() - t0,
         reason=why,
         blur_added=added,
+        cfa_filtered=bool(cfa),
     )
 
 
