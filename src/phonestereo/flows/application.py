@@ -178,7 +178,9 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             "strategy": c.strategy, "median_px": round(float(np.median(corr_v)), 5),
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
         }
-        if inputs.corrector.heating_corrected(entry.temperature_c):
+        if entry.temperature_c is not None and inputs.corrector.heating_corrected(
+            entry.temperature_c
+        ):
             heat = inputs.corrector.heating
             stages["correction"]["heating"] = {
                 **heat.to_dict(),

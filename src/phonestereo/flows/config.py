@@ -267,7 +267,7 @@ class Corrector:
         query = np.array(query, dtype=np.float64, copy=True)
         heat_v, heat_s = np.zeros(len(query)), np.zeros(len(query))
         if self.heating.ok:
-            if self.heating_corrected(temperature_c):
+            if temperature_c is not None and self.heating_corrected(temperature_c):
                 v, sd = self.heating.offset_px(np.full(len(query), float(temperature_c)))
                 heat_v, heat_s = v, sd
             else:
