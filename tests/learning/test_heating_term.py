@@ -73,3 +73,20 @@ def test_a_later_warmer_capture_is_corrected_within_its_sigma() -> None:
     # A capture that reports no temperature under a learned term carries the learned drift.
     _, p_none = with_term.correct_parts(q, "landscape", None)
     assert p_none["heating"][0] >= abs(with_term.heating.slope_px_per_c) * 0.5
+
+
+def test_without_temperatures_the_drift_still_to_come_is_in_sigma() -> None:
+    """The same faces, no temperature reported: the time slope of the learning captures is
+    significant, so the later capture's σ carries the drift still to come on a warm-up curve
+    of the τ the warm-up gate assumes (180 s / 2.6): its error is within 1σ (measured
+    −0.090 ± 0.105 px), where the blind correction put it at 1.9σ (± 0.047 px)."""
+    obs, t = _faces(report=False), 650.0
+    corr = Corrector(obs, FlowConfig())
+    assert not corr.heating.ok and corr.heating_time.ok
+    c, parts = corr.correct_parts([[1000.0, 750.0, 4.5]], "landscape", None, t)
+    assert parts["heating"][0] > 0
+    assert abs(c.value_px[0] - _truth(4.5, t)) <= c.sigma_px[0]
+    # No drift over the learning captures: no time σ (a warm module's σ is not inflated).
+    flat = [replace(o, d_measured_px=o.d_measured_px + K_PX_PER_C * (_temp(o.time_s) - 35.0))
+            for o in obs]
+    assert not Corrector(flat, FlowConfig()).heating_time.ok

@@ -168,7 +168,7 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     parts: dict[str, Any] = {}
     if config.learned_correction and inputs.corrector is not None:
         c, parts = inputs.corrector.correct_parts(
-            np.column_stack([grid, d_grid]), orientation, entry.temperature_c
+            np.column_stack([grid, d_grid]), orientation, entry.temperature_c, entry.time_s
         )
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,

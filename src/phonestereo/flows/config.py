@@ -71,7 +71,8 @@ class FlowConfig:
         °C from them (:mod:`~phonestereo.learning.heating_term`), refer the learned
         observations to one temperature and add the term, with its σ, to every capture that
         reports one; such captures then skip the warm-up gate (their drift is corrected, not
-        waited out).
+        waited out). Without temperatures, a significant drift of the learned offsets over the
+        learning captures' time puts the drift still to come into σ (τ = ``warmup_s`` / 2.6).
     roi : RoiConfig
         The ROI measurement's parameters. Its rectification mode and W-T switch are not in
         it: they are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
@@ -169,9 +170,13 @@ class Corrector:
         if not config.orientation_buckets and obs.size:
             obs["orientation"] = ALL_BUCKETS
         self.heating = HeatingTerm(False, "off (heating_by_temperature)")
+        self.heating_time = HeatingTerm(False, "off (heating_by_temperature)", index="time_s")
         if config.heating_by_temperature and config.learned_correction:
             self.heating = HeatingTerm.fit(obs)
             obs = self.heating.normalise(obs)  # referred to one temperature
+            if not self.heating.ok:  # no temperatures: the drift still to come is a σ
+                self.heating_time = HeatingTerm.fit(obs, index="time_s",
+                                                    tau_s=config.warmup_s / 2.6)
         self.observations = obs
         self.config = config
         pp: tuple[float, float] | None = None
@@ -242,11 +247,12 @@ class Corrector:
         return int(np.sum(self.observations["orientation"] == self.bucket(orientation)))
 
     def correct(
-        self, query: Any, orientation: str, temperature_c: float | None = None
+        self, query: Any, orientation: str, temperature_c: float | None = None,
+        time_s: float | None = None,
     ) -> Correction:
         """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels,
-        of a capture at ``temperature_c`` (°C, None = not reported)."""
-        return self.correct_parts(query, orientation, temperature_c)[0]
+        of a capture at ``temperature_c`` (°C, None = not reported) and ``time_s``."""
+        return self.correct_parts(query, orientation, temperature_c, time_s)[0]
 
     def heating_corrected(self, temperature_c: float | None) -> bool:
         """True when a capture at this temperature gets the learned heating term (so the
@@ -254,7 +260,8 @@ class Corrector:
         return self.heating.ok and temperature_c is not None and bool(np.isfinite(temperature_c))
 
     def correct_parts(
-        self, query: Any, orientation: str, temperature_c: float | None = None
+        self, query: Any, orientation: str, temperature_c: float | None = None,
+        time_s: float | None = None,
     ) -> tuple[Correction, dict[str, np.ndarray]]:
         """:meth:`correct` and its σ parts (px, each (N,)): ``fit`` (the correction's own
         statistical error), ``capture`` (a new capture's own offset: the capture-to-capture
@@ -262,7 +269,9 @@ class Corrector:
         the focal prior, :class:`~phonestereo.learning.extent.LearnedExtent`),
         ``extrapolation`` (beyond the learned disparities and sensor positions) and ``heating``
         (the learned heating term's σ at this temperature; a capture without a temperature
-        under a learned term carries the learned temperatures' whole drift)."""
+        under a learned term carries the learned temperatures' whole drift; without
+        temperatures, the drift the learning captures showed over time, extrapolated to
+        ``time_s``, :class:`~phonestereo.learning.heating_term.HeatingTerm`)."""
         bucket = self.bucket(orientation)
         query = np.array(query, dtype=np.float64, copy=True)
         heat_v, heat_s = np.zeros(len(query)), np.zeros(len(query))
@@ -275,6 +284,8 @@ class Corrector:
                 heat_s = np.full(len(query), abs(self.heating.slope_px_per_c) * (hi - lo))
             if query.ndim == 2 and query.shape[1] == 3:
                 query[:, 2] += heat_v  # the field lives at the reference temperature
+        elif self.heating_time.ok and time_s is not None:
+            heat_s = self.heating_time.offset_px(np.full(len(query), float(time_s)))[1]
         c = self._raw_correct(query, bucket)
         if not c.ok:
             return c, {}
@@ -289,7 +300,7 @@ class Corrector:
         )
         parts = {"fit": fit, "capture": np.full(n, self.capture_sigma_px),
                  "systematic": sys_px, "extrapolation": ext_px}
-        if self.heating.ok:
+        if self.heating.ok or self.heating_time.ok:
             parts["heating"] = heat_s
         sigma = np.sqrt(sum(v**2 for v in parts.values()))
         return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason), parts

@@ -92,7 +92,10 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "disparity offset per °C from the set's own face captures (capture-level "
             "fit with disparity and sensor position), refer the learned observations "
             "to their median temperature, and add the term with its σ to each capture "
-            "that reports a temperature; those captures skip the warm-up gate.",
+            "that reports a temperature; those captures skip the warm-up gate. "
+            "Without temperatures, a significant drift of the learned offsets over "
+            "the learning captures' time adds the drift still to come (τ = "
+            "warmup_s / 2.6) to σ.",
             "On: drift and temperature follow the same warm-up curve, and the face "
             "captures are taken while the module still warms (random-1006, ×2.36, "
             "6 px drift: the learned correction took the remaining drift as a gain "

@@ -20,7 +20,9 @@ sensor position (scaled), T_ref the median learned temperature. The learned obse
 then referred to T_ref (:meth:`HeatingTerm.normalise`) before the correction is fitted, and a
 capture at temperature T gets k·(T − T_ref) added with σ_k·|T − T_ref|
 (:meth:`HeatingTerm.offset_px`). Without temperatures (or too few captures, or no spread of
-temperature) the term is absent and says why.
+temperature) the term is absent and says why; the same fit against the capture time then
+gives, when its slope is significant, a σ for the drift still to come (not a correction: the
+warm-up curve's τ is unknown, see :attr:`HeatingTerm.index`).
 
 Examples
 --------
@@ -55,6 +57,10 @@ from phonestereo.learning.observation import as_observation_array, corrections_p
 MIN_CAPTURES = 6
 #: Smallest spread of the learned temperatures (°C) that can show a slope.
 MIN_SPAN_C = 0.05
+#: Smallest spread of the learned capture times (s) for the time-indexed σ.
+MIN_SPAN_S = 20.0
+#: A time slope counts (gives σ) when it is this many of its σ from zero.
+TIME_SIGNIFICANCE = 2.0
 
 
 @dataclass(frozen=True)
@@ -67,13 +73,24 @@ class HeatingTerm:
         False: no term (``reason`` says why); :meth:`offset_px` then gives 0 ± 0.
     reason : str
     slope_px_per_c, slope_sigma : float
-        k and its 1σ, px/°C (reference rectified pixels).
+        k and its 1σ, px/°C (reference rectified pixels; px/s for a time-indexed term).
     reference_c : float
-        T_ref, the median learned temperature, °C.
+        T_ref, the median learned temperature, °C (t_ref, s, for a time-indexed term).
     range_c : tuple[float, float]
-        Learned temperatures, min–max, °C.
+        Learned temperatures, min–max, °C (times, s, for a time-indexed term).
     n_captures : int
         Captures in the fit.
+    index : {"temperature_c", "time_s"}
+        What the term is indexed by. With ``"time_s"`` (the captures report no temperature)
+        the slope is px per second and the term is **not** a correction: the drift follows an
+        exponential of unknown τ that a line through the learning captures would overshoot,
+        so :meth:`offset_px` gives 0 and, when the slope is significant
+        (:data:`TIME_SIGNIFICANCE`), σ = |k|·τ·(1 − e^(−|t − t_ref|/τ)): the drift still to
+        come between t_ref and t on a warm-up curve of time constant τ (``tau_s``) that drifts
+        at k at t_ref.
+    tau_s : float
+        τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
+        ``FlowConfig.warmup_s`` / 2.6).
     """
 
     ok: bool
@@ -83,24 +100,30 @@ class HeatingTerm:
     reference_c: float = float("nan")
     range_c: tuple[float, float] = (float("nan"), float("nan"))
     n_captures: int = 0
+    index: str = "temperature_c"
+    tau_s: float = 70.0
 
     @classmethod
-    def fit(cls, observations: Any, *, min_captures: int = MIN_CAPTURES) -> HeatingTerm:
-        """Fit the term to learned observations (one bucket or all; module docstring)."""
+    def fit(
+        cls, observations: Any, *, min_captures: int = MIN_CAPTURES, index: str = "temperature_c",
+        tau_s: float = 70.0,
+    ) -> HeatingTerm:
+        """Fit the term to learned observations (one bucket or all; module docstring), by
+        ``index`` "temperature_c" (a correction) or "time_s" (a σ only, see ``index``)."""
         obs = as_observation_array(observations)
         if obs.size == 0:
-            return cls(False, "no observations")
-        temp = np.asarray(obs["temperature_c"], dtype=np.float64)
+            return cls(False, "no observations", index=index)
+        temp = np.asarray(obs[index], dtype=np.float64)
         keep = np.isfinite(temp)
         if not keep.any():
-            return cls(False, "the captures report no module temperature")
+            return cls(False, "the captures report no module temperature", index=index)
         obs, temp = obs[keep], temp[keep]
         c = corrections_px(obs)
         cid = np.unique(obs["capture_id"], return_inverse=True)[1].ravel()
         g = int(cid.max()) + 1
         if g < min_captures:
-            return cls(False, f"{g} face captures report a temperature; need >= {min_captures}",
-                       n_captures=g)
+            return cls(False, f"{g} face captures report a {index}; need >= {min_captures}",
+                       n_captures=g, index=index)
         n = np.bincount(cid, minlength=g).astype(np.float64)
 
         def mean(v: np.ndarray) -> np.ndarray:
@@ -109,9 +132,10 @@ class HeatingTerm:
         t_i, c_i, d_i = mean(temp), mean(c), mean(obs["d_measured_px"])
         x_i, y_i = mean(obs["x_px"]), mean(obs["y_px"])
         lo, hi = float(t_i.min()), float(t_i.max())
-        if hi - lo < MIN_SPAN_C:
-            return cls(False, f"the learned temperatures span {hi - lo:.3f} °C < {MIN_SPAN_C}",
-                       range_c=(lo, hi), n_captures=g)
+        span = MIN_SPAN_C if index == "temperature_c" else MIN_SPAN_S
+        if hi - lo < span:
+            return cls(False, f"the learned {index} span {hi - lo:.3f} < {span}",
+                       range_c=(lo, hi), n_captures=g, index=index)
         ref = float(np.median(t_i))
         scale = max(float(np.ptp(np.r_[x_i, y_i])), 1.0)
         cols = [np.ones(g), d_i - d_i.mean(), t_i - ref]
@@ -122,30 +146,39 @@ class HeatingTerm:
         for _ in range(2):  # one robust pass: drop captures beyond 3 robust σ, refit
             beta, k_sigma, res = _ols(x[use], c_i[use])
             if beta is None:
-                return cls(False, "the captures' disparities, temperatures and positions are "
+                return cls(False, f"the captures' disparities, {index} and positions are "
                            "collinear: the heating slope cannot be told", range_c=(lo, hi),
-                           n_captures=g)
+                           n_captures=g, index=index)
             full = c_i - x @ beta
             mad = 1.4826 * float(np.median(np.abs(res - np.median(res))))
             new = np.abs(full) <= max(3 * mad, 1e-9) if mad > 0 else use
             if new.sum() < x.shape[1] + 2 or np.array_equal(new, use):
                 break
             use = new
-        return cls(True, "", float(beta[2]), float(k_sigma), ref, (lo, hi), int(use.sum()))
+        k = float(beta[2])
+        if index != "temperature_c" and not abs(k) > TIME_SIGNIFICANCE * k_sigma:
+            return cls(False, f"no significant drift over the learning captures' {index}: "
+                       f"{k:.3g} ± {k_sigma:.2g} px per unit", k, float(k_sigma), ref, (lo, hi),
+                       int(use.sum()), index, tau_s)
+        return cls(True, "", k, float(k_sigma), ref, (lo, hi), int(use.sum()), index, tau_s)
 
     def offset_px(self, temperature_c: Any) -> tuple[np.ndarray, np.ndarray]:
-        """(k·(T − T_ref), σ_k·|T − T_ref|) at temperatures (°C; NaN or no term → 0, 0)."""
+        """(k·(T − T_ref), σ_k·|T − T_ref|) at temperatures (°C; NaN or no term → 0, 0); for
+        a time-indexed term (0, |k|·τ·(1 − e^(−|t − t_ref|/τ))) at times (s)."""
         t = np.asarray(temperature_c, dtype=np.float64)
         if not self.ok:
             return np.zeros_like(t), np.zeros_like(t)
         dt = np.where(np.isfinite(t), t - self.reference_c, 0.0)
+        if self.index != "temperature_c":
+            tau = max(self.tau_s, 1e-9)
+            return np.zeros_like(dt), abs(self.slope_px_per_c) * tau * -np.expm1(-np.abs(dt) / tau)
         return self.slope_px_per_c * dt, self.slope_sigma * np.abs(dt)
 
     def normalise(self, observations: Any) -> np.ndarray:
         """The observations referred to T_ref: d_measured + k·(T − T_ref), so that their
         corrections d_expected − d_measured lose the heating term (unknown T: unchanged)."""
         obs = as_observation_array(observations).copy()
-        if self.ok and obs.size:
+        if self.ok and obs.size and self.index == "temperature_c":
             value, _ = self.offset_px(obs["temperature_c"])
             obs["d_measured_px"] = obs["d_measured_px"] + value
         return obs
@@ -153,7 +186,7 @@ class HeatingTerm:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary."""
         return {
-            "ok": self.ok, "reason": self.reason,
+            "ok": self.ok, "reason": self.reason, "index": self.index,
             "slope_px_per_c": round(self.slope_px_per_c, 6),
             "slope_sigma": round(self.slope_sigma, 6),
             "reference_c": None if not np.isfinite(self.reference_c) else round(
@@ -177,4 +210,4 @@ def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, float, np.ndarray]:
     return beta, float(np.sqrt(max(cov[2, 2], 0.0))), res
 
 
-__all__ = ["MIN_CAPTURES", "MIN_SPAN_C", "HeatingTerm"]
+__all__ = ["MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "TIME_SIGNIFICANCE", "HeatingTerm"]
