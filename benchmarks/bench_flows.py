@@ -18,8 +18,9 @@ On a small rendered thesis-bench capture set (``folded-x3``, 2000 × 1500 wide; 
   cProfile pass of the rest (landmarks cached) gives its top functions.
 
 Run: ``.venv/bin/python benchmarks/bench_flows.py [--set DIR] [--size 4000x3000] [--repeat 3]
-[--json]`` (without ``--set`` the set is rendered into a temporary folder, ~100 s on 2 busy
-cores at 2000 × 1500; ``--keep DIR`` renders into DIR and keeps it). ``--size WxH`` renders
+[--small] [--json]`` (without ``--set`` the set is rendered into a temporary folder, ~100 s on
+2 busy cores at 2000 × 1500; ``--keep DIR`` renders into DIR and keeps it; ``--small`` renders
+10 captures instead of 24). ``--size WxH`` renders
 ``folded-x3`` at another output size with the same optics (issue #18's 12 MP case: 4000 × 3000,
 targets ≤ 100 ms application and ≤ 500 ms learning per capture): the pixel pitch scales by
 2000/W, so the fields of view, the focal lengths in mm and the scene are unchanged and every
@@ -128,10 +129,17 @@ def module_at_size(width: int, height: int, name: str = "folded-x3") -> Any:
                                    "tele": cam(spec.tele)})
 
 
+#: ``--small``: faces at 1, 2, 3 m × 2 sensor positions, the chart at 4 distances (10
+#: captures instead of 24; for the 12 MP case on a busy machine, where rendering dominates).
+SMALL_POSITIONS = ((0.0, 0.0), (0.5, 0.0))
+SMALL_DISTANCES_M = (0.8, 2.0, 3.2, 4.0)
+
+
 def render_set(out: Path, seed: int = 0, workers: int = 2,
-               size: tuple[int, int] | None = None) -> Path:
-    """Render the small thesis-bench set (24 captures) into ``out`` (``size``: the output
-    size of both cameras, :func:`module_at_size`; default the preset's 2000 × 1500)."""
+               size: tuple[int, int] | None = None, small: bool = False) -> Path:
+    """Render the small thesis-bench set (24 captures; ``small``: 10) into ``out``
+    (``size``: the output size of both cameras, :func:`module_at_size`, the ROI box scaled
+    with it so that it covers the same part of the chart; default the preset's 2000 × 1500)."""
     from phonestereo.sim.module import load_module
     from phonestereo.sim.scenarios import (
         BenchConfig,
@@ -141,10 +149,15 @@ def render_set(out: Path, seed: int = 0, workers: int = 2,
     )
     from phonestereo.sim.writer import write_capture_set
 
-    cfg = BenchConfig(
-        LearningConfig(distances_m=(1.0, 2.0, 3.0), attempts=1), VerificationConfig(attempts=1)
-    )
+    learn = LearningConfig(distances_m=(1.0, 2.0, 3.0), attempts=1)
+    verify = VerificationConfig(attempts=1)
+    if small:
+        learn = replace(learn, positions=SMALL_POSITIONS)
+        verify = replace(verify, distances_m=SMALL_DISTANCES_M)
     spec = load_module("folded-x3") if size is None else module_at_size(*size)
+    k = spec.wide.size[0] / 2000
+    verify = replace(verify, roi_px=(round(verify.roi_px[0] * k), round(verify.roi_px[1] * k)))
+    cfg = BenchConfig(learn, verify)
     plan = plan_scenario("thesis-bench", spec, seed, config=cfg)
     write_capture_set(out, plan, workers=workers)
     return out
@@ -518,7 +531,7 @@ def landmark_variants(
 
 # --- main -----------------------------------------------------------------------------------
 def run(set_dir: Path | None, repeat: int, size: tuple[int, int] | None = None,
-        keep: Path | None = None) -> dict[str, Any]:
+        keep: Path | None = None, small: bool = False, workers: int = 2) -> dict[str, Any]:
     """Render (or reuse) the set, then benchmark learning and application."""
     t0 = time.perf_counter()
     tmp = None
@@ -527,7 +540,7 @@ def run(set_dir: Path | None, repeat: int, size: tuple[int, int] | None = None,
         if keep is None:
             tmp = tempfile.TemporaryDirectory(prefix="bench_flows_")
             keep = Path(tmp.name) / "set"
-        set_dir = render_set(keep, size=size)
+        set_dir = render_set(keep, size=size, small=small, workers=workers)
         render_s = time.perf_counter() - t0
     try:
         cs = load_capture_set(set_dir)
@@ -605,6 +618,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="timed runs per capture (min kept)")
     ap.add_argument("--size", default=None, help="render folded-x3 at WxH (e.g. 4000x3000)")
     ap.add_argument("--keep", type=Path, default=None, help="render into this folder, keep it")
+    ap.add_argument("--small", action="store_true", help="render 10 captures instead of 24")
+    ap.add_argument("--workers", type=int, default=2, help="rendering processes")
     ap.add_argument("--json", action="store_true", help="print JSON instead of the table")
     args = ap.parse_args()
     size = None
@@ -615,7 +630,8 @@ def main() -> None:
             size = ()
         if len(size) != 2 or min(size) < 64:
             ap.error(f"--size {args.size!r}: use WxH, e.g. 4000x3000")
-    res = run(args.set, max(1, args.repeat), size, args.keep)  # type: ignore[arg-type]
+    res = run(args.set, max(1, args.repeat), size, args.keep,  # type: ignore[arg-type]
+              args.small, max(1, args.workers))
     if args.json:
         print(json.dumps(res))  # one line: benchmarks/run_all.py reads it
     else:
