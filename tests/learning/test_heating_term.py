@@ -90,3 +90,26 @@ def test_without_temperatures_the_drift_still_to_come_is_in_sigma() -> None:
     flat = [replace(o, d_measured_px=o.d_measured_px + K_PX_PER_C * (_temp(o.time_s) - 35.0))
             for o in obs]
     assert not Corrector(flat, FlowConfig()).heating_time.ok
+
+
+def test_a_cold_capture_with_a_temperature_is_corrected_not_gated() -> None:
+    """Item 4: with a learned heating term, a capture 60 s after start (cold for the 180 s
+    warm-up gate) that reports its temperature passes the heated gate, saying why; without a
+    temperature it is gated as before."""
+    from phonestereo.flows import application
+    from phonestereo.io import CaptureEntry
+
+    corr = Corrector(_faces(), FlowConfig())
+    img = np.zeros((4, 4), np.uint8)
+
+    def gates(temp: float | None) -> dict[str, tuple[bool, str]]:
+        entry = CaptureEntry(id="v", wide="w.png", tele="t.png", kind="verification",
+                             time_s=60.0, orientation="landscape", focus_mode="manual",
+                             temperature_c=temp)
+        inp = application.ApplicationInputs(None, entry, img, img, corr)  # type: ignore[arg-type]
+        r = application.run(FlowConfig(), inp)
+        return {g.name: (g.passed, g.reason) for g in r.gates}
+
+    passed, reason = gates(_temp(60.0))["heated"]
+    assert passed and "learned heating term" in reason
+    assert not gates(None)["heated"][0]

@@ -120,6 +120,10 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         inputs.corrector.heating_corrected(entry.temperature_c))
     gates = capture_gates(entry, warmup_s=config.warmup_s,
                           heating=config.heating_gate and not heated)
+    if heated and config.heating_gate:
+        gates = [Gate("heated", True, f"{entry.temperature_c:.2f} °C: the drift is corrected by "
+                      "the learned heating term, not waited out") if g.name == "heated" else g
+                 for g in gates]
     bad = first_failed(gates)
     if bad is not None:
         return _gated(entry.id, bad.name, bad.reason, gates, seconds=time.perf_counter() - t0)
