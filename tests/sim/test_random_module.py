@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from phonestereo.errors import InputError
+from phonestereo.sim.isp_spec import IspSpec
 from phonestereo.sim.module import load_module, parse_module
 from phonestereo.sim.random_module import load_ranges, random_module
 
@@ -90,3 +91,67 @@ def test_periscope_x5_preset_is_the_held_out_module_described_in_issue_18() -> N
     folded = load_module("folded-x3")
     assert spec.tele.pixel_pitch_um < folded.tele.pixel_pitch_um  # smaller pixels
     assert spec.wide.pixel_pitch_um < folded.wide.pixel_pitch_um
+    # A phone ISP per camera; the periscope's small-pixel tele is denoised harder than any
+    # preset tele and sharpened less than its wide (docs/module.md, typical phone values).
+    assert spec.isp("wide") is not None and spec.isp("tele") is not None
+    assert spec.tele.isp.denoise_strength > folded.tele.isp.denoise_strength
+    assert spec.tele.isp.denoise_strength > spec.wide.isp.denoise_strength
+    assert spec.tele.isp.sharpen_amount < spec.wide.isp.sharpen_amount
+
+
+def _within(value: float, pair: tuple[float, float]) -> bool:
+    # The drawn values are rounded to 3 decimals: 1e-3 of slack.
+    return pair[0] - 1e-3 <= value <= pair[1] + 1e-3
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_random_isp_blocks_validate_and_respect_their_ranges(seed: int) -> None:
+    r = load_ranges()
+    spec = random_module(seed)
+    for cam, isp_r in ((spec.wide, r.wide_isp), (spec.tele, r.tele_isp)):
+        isp = cam.isp
+        assert isp is not None
+        IspSpec.model_validate(isp.model_dump())  # a valid block (the JSON schema's checks)
+        assert isp.cfa_pattern in isp_r.cfa_patterns
+        assert isp.demosaic in isp_r.demosaic_methods
+        assert isp.raw_bit_depth in isp_r.raw_bit_depths
+        assert isp.raw_black_level_dn == 64 * 2 ** (isp.raw_bit_depth - 10)
+        assert _within(isp.channel_sensitivity[0], isp_r.red_sensitivity)
+        assert _within(isp.channel_sensitivity[2], isp_r.blue_sensitivity)
+        for name in ("ccm_strength", "tone_gamma", "denoise_strength", "denoise_radius_px",
+                     "sharpen_amount", "sharpen_radius_px", "chroma_blur_px",
+                     "chroma_saturation", "jpeg_quality"):
+            assert _within(getattr(isp, name), getattr(isp_r, name)), name
+    # Drawn independently: the two cameras never share one tuning.
+    assert spec.wide.isp != spec.tele.isp
+
+
+def test_the_isp_draw_leaves_the_rest_of_a_seed_as_it_was(tmp_path) -> None:
+    # The ISP has its own random stream: switching it off changes nothing else, so the
+    # modules measured before the ISP was drawn (random-1006, random-1010) keep their optics.
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({"isp": False}))
+    raw = random_module(1006, load_ranges(path))
+    drawn = random_module(1006)
+    assert raw.wide.isp is None and raw.tele.isp is None
+    assert raw.model_copy(update={"description": ""}) == drawn.model_copy(update={
+        "description": "", "wide": drawn.wide.model_copy(update={"isp": None}),
+        "tele": drawn.tele.model_copy(update={"isp": None})})
+    assert (drawn.tele.focal_length_mm, drawn.wide.size) == (5.3854, (2080, 1560))  # as on main
+
+
+def test_isp_ranges_are_overridable_key_by_key(tmp_path) -> None:
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({"tele_isp": {"jpeg_quality": [90, 90],
+                                             "demosaic_methods": ["vng"]}}))
+    r = load_ranges(path)
+    assert r.tele_isp.denoise_strength == load_ranges().tele_isp.denoise_strength  # merged
+    for seed in (1, 2, 3):
+        tele = random_module(seed, r).tele.isp
+        assert tele is not None and tele.jpeg_quality == 90 and tele.demosaic == "vng"
+    path.write_text(json.dumps({"wide_isp": {"sharpen_amount": [2.0, 1.0]}}))
+    with pytest.raises(InputError, match="sharpen_amount"):
+        load_ranges(path)
+    path.write_text(json.dumps({"wide_isp": {"cfa_patterns": ["RGBW"]}}))
+    with pytest.raises(InputError, match="cfa_patterns"):
+        load_ranges(path)

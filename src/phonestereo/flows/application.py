@@ -115,7 +115,15 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     """Run the application phase on one capture (Fig. 4-2); see the module docstring."""
     t0 = time.perf_counter()
     entry = inputs.entry
-    gates = capture_gates(entry, warmup_s=config.warmup_s, heating=config.heating_gate)
+    # A capture whose temperature indexes the learned heating term is corrected, not gated.
+    heated = inputs.corrector is not None and config.learned_correction and (
+        inputs.corrector.heating_corrected(entry.temperature_c))
+    gates = capture_gates(entry, warmup_s=config.warmup_s,
+                          heating=config.heating_gate and not heated)
+    if heated and config.heating_gate:
+        gates = [Gate("heated", True, f"{entry.temperature_c:.2f} °C: the drift is corrected by "
+                      "the learned heating term, not waited out") if g.name == "heated" else g
+                 for g in gates]
     bad = first_failed(gates)
     if bad is not None:
         return _gated(entry.id, bad.name, bad.reason, gates, seconds=time.perf_counter() - t0)
@@ -163,7 +171,9 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     corr_s = np.zeros(len(d_grid))
     parts: dict[str, Any] = {}
     if config.learned_correction and inputs.corrector is not None:
-        c, parts = inputs.corrector.correct_parts(np.column_stack([grid, d_grid]), orientation)
+        c, parts = inputs.corrector.correct_parts(
+            np.column_stack([grid, d_grid]), orientation, entry.temperature_c, entry.time_s
+        )
         if not c.ok or not np.isfinite(c.value_px).all():
             return _gated(entry.id, "correction", c.reason or "correction unavailable", gates,
                           stages=stages, seconds=time.perf_counter() - t0)
@@ -172,6 +182,14 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             "strategy": c.strategy, "median_px": round(float(np.median(corr_v)), 5),
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
         }
+        if entry.temperature_c is not None and inputs.corrector.heating_corrected(
+            entry.temperature_c
+        ):
+            heat = inputs.corrector.heating
+            stages["correction"]["heating"] = {
+                **heat.to_dict(),
+                "offset_px": round(float(heat.offset_px(float(entry.temperature_c))[0]), 5),
+            }
     d_fix = d_grid + corr_v
     z = ref.backproject(grid, d_fix)[:, 2]
     k = int(np.argsort(z)[len(z) // 2])  # the median grid point

@@ -16,6 +16,7 @@ from phonestereo.errors import InputError
 from phonestereo.flows.roi_disparity import RoiConfig
 from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
+from phonestereo.learning.heating_term import HeatingTerm
 from phonestereo.learning.lookup import STRATEGIES, DictionaryLookup
 from phonestereo.learning.observation import Correction, as_observation_array
 
@@ -65,6 +66,13 @@ class FlowConfig:
     max_relative_sigma : float
         The extrapolation gate: a depth whose σ/Z exceeds this (the capture lies beyond what
         was learned) is gated with the reason instead of answered.
+    heating_by_temperature : bool
+        When the face captures report the module temperature, learn the disparity offset per
+        °C from them (:mod:`~phonestereo.learning.heating_term`), refer the learned
+        observations to one temperature and add the term, with its σ, to every capture that
+        reports one; such captures then skip the warm-up gate (their drift is corrected, not
+        waited out). Without temperatures, a significant drift of the learned offsets over the
+        learning captures' time puts the drift still to come into σ (τ = ``warmup_s`` / 2.6).
     roi : RoiConfig
         The ROI measurement's parameters. Its rectification mode and W-T switch are not in
         it: they are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
@@ -82,6 +90,7 @@ class FlowConfig:
     field_max_degree: int = 3
     focal_rel_sigma: float = FOCAL_REL_SIGMA
     max_relative_sigma: float = 0.05
+    heating_by_temperature: bool = True
     roi: RoiConfig = field(default_factory=RoiConfig)
 
     def __post_init__(self) -> None:
@@ -160,6 +169,14 @@ class Corrector:
         obs = as_observation_array(observations).copy()
         if not config.orientation_buckets and obs.size:
             obs["orientation"] = ALL_BUCKETS
+        self.heating = HeatingTerm(False, "off (heating_by_temperature)")
+        self.heating_time = HeatingTerm(False, "off (heating_by_temperature)", index="time_s")
+        if config.heating_by_temperature and config.learned_correction:
+            self.heating = HeatingTerm.fit(obs)
+            obs = self.heating.normalise(obs)  # referred to one temperature
+            if not self.heating.ok:  # no temperatures: the drift still to come is a σ
+                self.heating_time = HeatingTerm.fit(obs, index="time_s",
+                                                    tau_s=config.warmup_s / 2.6)
         self.observations = obs
         self.config = config
         pp: tuple[float, float] | None = None
@@ -229,22 +246,50 @@ class Corrector:
             return 0
         return int(np.sum(self.observations["orientation"] == self.bucket(orientation)))
 
-    def correct(self, query: Any, orientation: str) -> Correction:
-        """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels."""
-        return self.correct_parts(query, orientation)[0]
+    def correct(
+        self, query: Any, orientation: str, temperature_c: float | None = None,
+        time_s: float | None = None,
+    ) -> Correction:
+        """Corrections (N,) for (x, y, d_measured) queries (N, 3), reference rectified pixels,
+        of a capture at ``temperature_c`` (°C, None = not reported) and ``time_s``."""
+        return self.correct_parts(query, orientation, temperature_c, time_s)[0]
+
+    def heating_corrected(self, temperature_c: float | None) -> bool:
+        """True when a capture at this temperature gets the learned heating term (so the
+        warm-up gate need not wait its drift out)."""
+        return self.heating.ok and temperature_c is not None and bool(np.isfinite(temperature_c))
 
     def correct_parts(
-        self, query: Any, orientation: str
+        self, query: Any, orientation: str, temperature_c: float | None = None,
+        time_s: float | None = None,
     ) -> tuple[Correction, dict[str, np.ndarray]]:
         """:meth:`correct` and its σ parts (px, each (N,)): ``fit`` (the correction's own
         statistical error), ``capture`` (a new capture's own offset: the capture-to-capture
         scatter), ``systematic`` (common-mode scale: the learned captures' relative spread and
-        the focal prior, :class:`~phonestereo.learning.extent.LearnedExtent`)
-        and ``extrapolation`` (beyond the learned disparities and sensor positions)."""
+        the focal prior, :class:`~phonestereo.learning.extent.LearnedExtent`),
+        ``extrapolation`` (beyond the learned disparities and sensor positions) and ``heating``
+        (the learned heating term's σ at this temperature; a capture without a temperature
+        under a learned term carries the learned temperatures' whole drift; without
+        temperatures, the drift the learning captures showed over time, extrapolated to
+        ``time_s``, :class:`~phonestereo.learning.heating_term.HeatingTerm`)."""
         bucket = self.bucket(orientation)
+        query = np.array(query, dtype=np.float64, copy=True)
+        heat_v, heat_s = np.zeros(len(query)), np.zeros(len(query))
+        if self.heating.ok:
+            if temperature_c is not None and self.heating_corrected(temperature_c):
+                v, sd = self.heating.offset_px(np.full(len(query), float(temperature_c)))
+                heat_v, heat_s = v, sd
+            else:
+                lo, hi = self.heating.range_c
+                heat_s = np.full(len(query), abs(self.heating.slope_px_per_c) * (hi - lo))
+            if query.ndim == 2 and query.shape[1] == 3:
+                query[:, 2] += heat_v  # the field lives at the reference temperature
+        elif self.heating_time.ok and time_s is not None:
+            heat_s = self.heating_time.offset_px(np.full(len(query), float(time_s)))[1]
         c = self._raw_correct(query, bucket)
         if not c.ok:
             return c, {}
+        c = Correction(c.value_px + heat_v, c.sigma_px, c.n_used, c.strategy, c.reason)
         fit = c.sigma_px
         if self.config.lookup == "field":  # the mean's error; one face's scatter is not ours
             fit = self._lookup.fits[bucket].field.predict(query, scatter=False).sigma_px
@@ -255,6 +300,8 @@ class Corrector:
         )
         parts = {"fit": fit, "capture": np.full(n, self.capture_sigma_px),
                  "systematic": sys_px, "extrapolation": ext_px}
+        if self.heating.ok or self.heating_time.ok:
+            parts["heating"] = heat_s
         sigma = np.sqrt(sum(v**2 for v in parts.values()))
         return Correction(c.value_px, sigma, c.n_used, c.strategy, c.reason), parts
 

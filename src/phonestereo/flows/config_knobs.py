@@ -86,6 +86,21 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "5 %: an order above the learned flow's error inside its range, so only captures "
             "far outside the learned disparities are gated.",
         ),
+        "heating_by_temperature": (
+            "bool",
+            "When the face captures report the module temperature, learn the "
+            "disparity offset per °C from the set's own face captures (capture-level "
+            "fit with disparity and sensor position), refer the learned observations "
+            "to their median temperature, and add the term with its σ to each capture "
+            "that reports a temperature; those captures skip the warm-up gate. "
+            "Without temperatures, a significant drift of the learned offsets over "
+            "the learning captures' time adds the drift still to come (τ = "
+            "warmup_s / 2.6) to σ.",
+            "On: drift and temperature follow the same warm-up curve, and the face "
+            "captures are taken while the module still warms (random-1006, ×2.36, "
+            "6 px drift: the learned correction took the remaining drift as a gain "
+            "over disparity, full flow −1.3 % at 0.8 m to −3.4 % at 3.6 m).",
+        ),
     },
     "roi": {
         "expand": (

@@ -31,6 +31,13 @@ How a module is drawn (every range is ``[low, high]``, drawn uniformly unless sa
 - **Reports**: temperature with probability ``temperature_reported_probability``.
 - **Hand shake**: ``handheld_rotation_deg``, ``handheld_translation_mm`` (1σ per axis).
 - **Sensor**: ``full_well_e``, ``read_noise_e`` per camera.
+- **ISP** (``wide_isp``, ``tele_isp``: :class:`IspRanges`, one set of ranges per camera, the
+  two drawn independently): CFA pattern and demosaicing method (uniform choices), raw bit depth
+  (choice; black level 64 DN at 10 bits, scaled by 2^(bits − 10)), channel sensitivities, CCM
+  strength, tone γ, denoise strength and radius, sharpen amount and radius, chroma blur and
+  saturation, JPEG quality (an integer). ``isp: false`` gives both cameras the raw linear path.
+  The ISP is drawn from its own stream (``[seed, 0x5EED40D, 1]``), so adding it left every
+  other parameter of a seed's module as it was.
 
 Examples
 --------
@@ -46,7 +53,7 @@ from __future__ import annotations
 import json
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -58,6 +65,56 @@ RANGES_FILE = "random_ranges.json"
 #: Draws tried before a seed is declared impossible under the given ranges.
 MAX_DRAWS = 2000
 Pair = tuple[float, float]
+
+
+class IspRanges(BaseModel):
+    """Ranges of one camera's ISP block (:class:`~phonestereo.sim.isp_spec.IspSpec`); the
+    defaults are the wide's (a main camera in good light), ``docs/module-random.md``."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    cfa_patterns: tuple[Literal["RGGB", "BGGR", "GRBG", "GBRG"], ...] = (
+        "RGGB", "BGGR", "GRBG", "GBRG")
+    demosaic_methods: tuple[Literal["bilinear", "ea", "vng"], ...] = ("ea", "vng")
+    raw_bit_depths: tuple[int, ...] = (10, 12)
+    red_sensitivity: Pair = (0.45, 0.6)
+    blue_sensitivity: Pair = (0.6, 0.8)
+    ccm_strength: Pair = (0.4, 1.0)
+    tone_gamma: Pair = (2.2, 2.6)
+    denoise_strength: Pair = (0.5, 2.0)
+    denoise_radius_px: Pair = (1.0, 2.0)
+    sharpen_amount: Pair = (0.5, 1.5)
+    sharpen_radius_px: Pair = (0.7, 1.5)
+    chroma_blur_px: Pair = (3.0, 8.0)
+    chroma_saturation: Pair = (0.9, 1.2)
+    jpeg_quality: Pair = (88, 97)
+
+    @model_validator(mode="after")
+    def _check(self) -> IspRanges:
+        _check_pairs(self, "isp ")
+        for name in ("cfa_patterns", "demosaic_methods", "raw_bit_depths"):
+            if not getattr(self, name):
+                raise InputError(f"isp range {name} must list at least one choice")
+        if not all(8 <= b <= 16 for b in self.raw_bit_depths):
+            raise PhysicsError(f"raw_bit_depths must be 8-16 bits, got {self.raw_bit_depths}")
+        return self
+
+
+def _check_pairs(model: BaseModel, what: str = "") -> None:
+    """Every ``[low, high]`` field (annotated :data:`Pair`) finite with low <= high."""
+    for name, field in type(model).model_fields.items():
+        if field.annotation != Pair:
+            continue
+        lo, hi = getattr(model, name)
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            raise InputError(f"{what}range {name} must be [low, high] with low <= high, "
+                             f"got {[lo, hi]}")
+
+
+#: The tele's ISP ranges: smaller pixels and a slower lens, so a noisier raw image, denoised
+#: harder (1-3x its noise profile) and sharpened less (0.2-1.0), JPEG 85-95.
+TELE_ISP = IspRanges(denoise_strength=(1.0, 3.0), denoise_radius_px=(1.2, 2.5),
+                     sharpen_amount=(0.2, 1.0), sharpen_radius_px=(0.8, 1.5),
+                     jpeg_quality=(85, 95))
 
 
 class ModuleRanges(BaseModel):
@@ -96,14 +153,13 @@ class ModuleRanges(BaseModel):
     full_well_e: Pair = (3000.0, 8000.0)
     read_noise_e: Pair = (1.5, 3.5)
 
+    isp: bool = True
+    wide_isp: IspRanges = IspRanges()
+    tele_isp: IspRanges = TELE_ISP
+
     @model_validator(mode="after")
     def _check(self) -> ModuleRanges:
-        for name, value in self:
-            if isinstance(value, tuple):
-                lo, hi = value
-                if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
-                    raise InputError(f"range {name} must be [low, high] with low <= high, "
-                                     f"got {list(value)}")
+        _check_pairs(self)
         if self.width_px[0] < 64:
             raise PhysicsError(f"width_px {list(self.width_px)} is too small for a camera")
         if self.pixel_pitch_um[0] <= 0 or self.focal_ratio[0] < 1:
@@ -131,7 +187,12 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
                              f"{exc.lineno}") from None
         if not isinstance(user, dict):
             raise InputError(f"--ranges file {p} must hold a JSON object of ranges")
-        base.update(user)
+        for key, value in user.items():  # the ISP ranges merge key by key
+            if key.endswith("_isp") and isinstance(value, dict) and isinstance(base.get(key),
+                                                                               dict):
+                base[key] = {**base[key], **value}
+            else:
+                base[key] = value
     try:
         return ModuleRanges.model_validate(base)
     except ValidationError as err:
@@ -189,6 +250,30 @@ def _camera(base: dict[str, Any], optics: tuple[float, float, float], size: tupl
                 "read_noise_e": round(_u(rng, r.read_noise_e), 2)},
     )
     return cam
+
+
+def _isp(rng: np.random.Generator, r: IspRanges) -> dict[str, Any]:
+    """One camera's ISP block drawn from its ranges (module docstring)."""
+    bits = int(rng.choice(r.raw_bit_depths))
+    return {
+        "cfa_pattern": str(rng.choice(r.cfa_patterns)),
+        "channel_sensitivity": [round(_u(rng, r.red_sensitivity), 3), 1.0,
+                                round(_u(rng, r.blue_sensitivity), 3)],
+        "raw_bit_depth": bits,
+        "raw_black_level_dn": float(64 * 2 ** (bits - 10)),
+        "white_balance_gains": None,
+        "demosaic": str(rng.choice(r.demosaic_methods)),
+        "ccm_strength": round(_u(rng, r.ccm_strength), 3),
+        "tone_gamma": round(_u(rng, r.tone_gamma), 3),
+        "denoise_strength": round(_u(rng, r.denoise_strength), 3),
+        "denoise_radius_px": round(_u(rng, r.denoise_radius_px), 3),
+        "sharpen_amount": round(_u(rng, r.sharpen_amount), 3),
+        "sharpen_radius_px": round(_u(rng, r.sharpen_radius_px), 3),
+        "chroma_blur_px": round(_u(rng, r.chroma_blur_px), 2),
+        "chroma_saturation": round(_u(rng, r.chroma_saturation), 3),
+        "jpeg_quality": int(rng.integers(int(r.jpeg_quality[0]), int(r.jpeg_quality[1]) + 1)),
+        "notes": "drawn by phonestereo module random from the ranges of docs/module-random.md",
+    }
 
 
 def random_module(seed: int, ranges: ModuleRanges | None = None) -> ModuleSpec:
@@ -252,6 +337,9 @@ def random_module(seed: int, ranges: ModuleRanges | None = None) -> ModuleSpec:
                      "translation_mm": round(_u(rng, r.handheld_translation_mm), 3)},
         "reports": {**base["reports"], "temperature": temperature},
     }
+    isp_rng = np.random.default_rng([int(seed), 0x5EED_40D, 1])  # its own stream (docstring)
+    for role, isp_ranges in (("wide", r.wide_isp), ("tele", r.tele_isp)):
+        data[role]["isp"] = _isp(isp_rng, isp_ranges) if r.isp else None
     data["description"] = _describe(data, optics["ratio"], k)
     return parse_module(data, f"random module (seed {seed})")
 
@@ -265,8 +353,23 @@ def _describe(data: dict[str, Any], ratio: float, noise_scale: float) -> str:
         f"f/{w['f_number']} {w['pixel_pitch_um']:.2f} um, {w['size'][0]}x{w['size'][1]} px; "
         f"baseline {np.hypot(ex[0], ex[1]):.1f} mm, t_z {ex[2]:.1f} mm; factory noise "
         f"x{noise_scale:.2f}; temperature {'' if data['reports']['temperature'] else 'not '}"
-        "reported."
+        f"reported; ISP {_isp_text(w.get('isp'))} (wide), {_isp_text(t.get('isp'))} (tele)."
     )
 
 
-__all__ = ["MAX_DRAWS", "RANGES_FILE", "ModuleRanges", "load_ranges", "random_module"]
+def _isp_text(isp: dict[str, Any] | None) -> str:
+    if isp is None:
+        return "off"
+    return (f"{isp['cfa_pattern']} {isp['demosaic']}, denoise {isp['denoise_strength']:.2f}, "
+            f"sharpen {isp['sharpen_amount']:.2f}, JPEG q{isp['jpeg_quality']}")
+
+
+__all__ = [
+    "MAX_DRAWS",
+    "RANGES_FILE",
+    "TELE_ISP",
+    "IspRanges",
+    "ModuleRanges",
+    "load_ranges",
+    "random_module",
+]

@@ -1,0 +1,217 @@
+"""The heating term of a learned correction, indexed by the module temperature (thesis §3.1,
+fix option 1 and chapter 5; issue 18 item 4).
+
+A warming module's principal points drift, so the disparity offset a face capture teaches
+depends on how warm the module was. The learning captures of a set are taken one after the
+other while the module is still warming (the warm-up gate only guarantees most of the drift
+has happened), and usually in distance order, so a correction that ignores it learns the
+remaining drift as a *gain* over disparity and extrapolates it — a common-mode error that no
+statistical σ of the fit shows. Drift and reported temperature follow the same warm-up curve
+(both are driven by the same heat), so the offset is linear in the temperature.
+
+:class:`HeatingTerm` learns that slope from the set's own face captures: a capture-level
+least-squares fit (captures are the independent units; their observations share one heating
+state) of the mean correction c_i on
+
+    c_i = a + g·d_i + k·(T_i − T_ref) + b_x·x̃_i + b_y·ỹ_i,
+
+d_i the capture's mean measured disparity, T_i its reported temperature, x̃, ỹ its mean
+sensor position (scaled), T_ref the median learned temperature. The learned observations are
+then referred to T_ref (:meth:`HeatingTerm.normalise`) before the correction is fitted, and a
+capture at temperature T gets k·(T − T_ref) added with σ_k·|T − T_ref|
+(:meth:`HeatingTerm.offset_px`) — when k is significant (|k| > :data:`SIGNIFICANCE` σ_k): a
+slope the captures cannot tell from zero would only add its noise to every capture. Without
+temperatures (or too few captures, no spread of temperature, no significant slope) the term is
+absent and says why; the same fit against the capture time then
+gives, when its slope is significant, a σ for the drift still to come (not a correction: the
+warm-up curve's τ is unknown, see :attr:`HeatingTerm.index`).
+
+Examples
+--------
+>>> import numpy as np
+>>> from phonestereo.learning.observation import Observation
+>>> rng = np.random.default_rng(1)
+>>> obs = []                             # 12 captures warming from 30 to 31.1 °C, k = 0.3 px/°C
+>>> for i in range(12):
+...     temp, d = 30.0 + 0.1 * i, 18 / (1 + i // 4)
+...     for x in (800.0, 1000.0, 1200.0):
+...         c = 0.5 + 0.3 * (temp - 30.0) + rng.normal(0, 0.005)
+...         obs.append(Observation(x, 750.0, d - c, d, 1 + i // 4, "landscape", "", 300.0 + i,
+...                                temp, f"c{i}"))
+>>> term = HeatingTerm.fit(obs)
+>>> term.ok, bool(abs(term.slope_px_per_c - 0.3) < 3 * term.slope_sigma < 0.05)
+(True, True)
+>>> value, sigma = term.offset_px(31.55)              # 1 °C above the learned median
+>>> round(float(value), 1), bool(sigma > 0)
+(0.3, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from phonestereo.learning.observation import as_observation_array, corrections_px
+
+#: Fewest face captures with a reported temperature for a heating term.
+MIN_CAPTURES = 6
+#: Smallest spread of the learned temperatures (°C) that can show a slope.
+MIN_SPAN_C = 0.05
+#: Smallest spread of the learned capture times (s) for the time-indexed σ.
+MIN_SPAN_S = 20.0
+#: A slope counts (a temperature correction, or a time σ) when it is this many of its σ from
+#: zero; below, the term is absent (random-1010: −0.19 ± 0.39 px/°C applied as a correction
+#: moved the full flow from 0.69 / 1.01 % to 0.97 / 1.76 %; its true heating drift is 0.03 px).
+SIGNIFICANCE = 2.0
+
+
+@dataclass(frozen=True)
+class HeatingTerm:
+    """A learned disparity offset per °C of module temperature (module docstring).
+
+    Attributes
+    ----------
+    ok : bool
+        False: no term (``reason`` says why); :meth:`offset_px` then gives 0 ± 0.
+    reason : str
+    slope_px_per_c, slope_sigma : float
+        k and its 1σ, px/°C (reference rectified pixels; px/s for a time-indexed term).
+    reference_c : float
+        T_ref, the median learned temperature, °C (t_ref, s, for a time-indexed term).
+    range_c : tuple[float, float]
+        Learned temperatures, min–max, °C (times, s, for a time-indexed term).
+    n_captures : int
+        Captures in the fit.
+    index : {"temperature_c", "time_s"}
+        What the term is indexed by. With ``"time_s"`` (the captures report no temperature)
+        the slope is px per second and the term is **not** a correction: the drift follows an
+        exponential of unknown τ that a line through the learning captures would overshoot,
+        so :meth:`offset_px` gives 0 and, when the slope is significant
+        (:data:`SIGNIFICANCE`), σ = |k|·τ·(1 − e^(−|t − t_ref|/τ)): the drift still to
+        come between t_ref and t on a warm-up curve of time constant τ (``tau_s``) that drifts
+        at k at t_ref.
+    tau_s : float
+        τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
+        ``FlowConfig.warmup_s`` / 2.6).
+    """
+
+    ok: bool
+    reason: str
+    slope_px_per_c: float = 0.0
+    slope_sigma: float = 0.0
+    reference_c: float = float("nan")
+    range_c: tuple[float, float] = (float("nan"), float("nan"))
+    n_captures: int = 0
+    index: str = "temperature_c"
+    tau_s: float = 70.0
+
+    @classmethod
+    def fit(
+        cls, observations: Any, *, min_captures: int = MIN_CAPTURES, index: str = "temperature_c",
+        tau_s: float = 70.0,
+    ) -> HeatingTerm:
+        """Fit the term to learned observations (one bucket or all; module docstring), by
+        ``index`` "temperature_c" (a correction) or "time_s" (a σ only, see ``index``)."""
+        obs = as_observation_array(observations)
+        if obs.size == 0:
+            return cls(False, "no observations", index=index)
+        temp = np.asarray(obs[index], dtype=np.float64)
+        keep = np.isfinite(temp)
+        if not keep.any():
+            return cls(False, "the captures report no module temperature", index=index)
+        obs, temp = obs[keep], temp[keep]
+        c = corrections_px(obs)
+        cid = np.unique(obs["capture_id"], return_inverse=True)[1].ravel()
+        g = int(cid.max()) + 1
+        if g < min_captures:
+            return cls(False, f"{g} face captures report a {index}; need >= {min_captures}",
+                       n_captures=g, index=index)
+        n = np.bincount(cid, minlength=g).astype(np.float64)
+
+        def mean(v: np.ndarray) -> np.ndarray:
+            return np.bincount(cid, np.asarray(v, dtype=np.float64), g) / n
+
+        t_i, c_i, d_i = mean(temp), mean(c), mean(obs["d_measured_px"])
+        x_i, y_i = mean(obs["x_px"]), mean(obs["y_px"])
+        lo, hi = float(t_i.min()), float(t_i.max())
+        span = MIN_SPAN_C if index == "temperature_c" else MIN_SPAN_S
+        if hi - lo < span:
+            return cls(False, f"the learned {index} span {hi - lo:.3f} < {span}",
+                       range_c=(lo, hi), n_captures=g, index=index)
+        ref = float(np.median(t_i))
+        scale = max(float(np.ptp(np.r_[x_i, y_i])), 1.0)
+        cols = [np.ones(g), d_i - d_i.mean(), t_i - ref]
+        if g >= min_captures + 2:  # sensor position, when the captures can afford it
+            cols += [(v - v.mean()) / scale for v in (x_i, y_i) if np.ptp(v) > 1.0]
+        x = np.column_stack(cols)
+        use = np.ones(g, dtype=bool)
+        for _ in range(2):  # one robust pass: drop captures beyond 3 robust σ, refit
+            beta, k_sigma, res = _ols(x[use], c_i[use])
+            if beta is None:
+                return cls(False, f"the captures' disparities, {index} and positions are "
+                           "collinear: the heating slope cannot be told", range_c=(lo, hi),
+                           n_captures=g, index=index)
+            full = c_i - x @ beta
+            mad = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+            new = np.abs(full) <= max(3 * mad, 1e-9) if mad > 0 else use
+            if new.sum() < x.shape[1] + 2 or np.array_equal(new, use):
+                break
+            use = new
+        k = float(beta[2])
+        if not abs(k) > SIGNIFICANCE * k_sigma:
+            return cls(False, f"no significant drift over the learning captures' {index}: "
+                       f"{k:.3g} ± {k_sigma:.2g} px per unit", k, float(k_sigma), ref, (lo, hi),
+                       int(use.sum()), index, tau_s)
+        return cls(True, "", k, float(k_sigma), ref, (lo, hi), int(use.sum()), index, tau_s)
+
+    def offset_px(self, temperature_c: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(k·(T − T_ref), σ_k·|T − T_ref|) at temperatures (°C; NaN or no term → 0, 0); for
+        a time-indexed term (0, |k|·τ·(1 − e^(−|t − t_ref|/τ))) at times (s)."""
+        t = np.asarray(temperature_c, dtype=np.float64)
+        if not self.ok:
+            return np.zeros_like(t), np.zeros_like(t)
+        dt = np.where(np.isfinite(t), t - self.reference_c, 0.0)
+        if self.index != "temperature_c":
+            tau = max(self.tau_s, 1e-9)
+            return np.zeros_like(dt), abs(self.slope_px_per_c) * tau * -np.expm1(-np.abs(dt) / tau)
+        return self.slope_px_per_c * dt, self.slope_sigma * np.abs(dt)
+
+    def normalise(self, observations: Any) -> np.ndarray:
+        """The observations referred to T_ref: d_measured + k·(T − T_ref), so that their
+        corrections d_expected − d_measured lose the heating term (unknown T: unchanged)."""
+        obs = as_observation_array(observations).copy()
+        if self.ok and obs.size and self.index == "temperature_c":
+            value, _ = self.offset_px(obs["temperature_c"])
+            obs["d_measured_px"] = obs["d_measured_px"] + value
+        return obs
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary."""
+        return {
+            "ok": self.ok, "reason": self.reason, "index": self.index,
+            "slope_px_per_c": round(self.slope_px_per_c, 6),
+            "slope_sigma": round(self.slope_sigma, 6),
+            "reference_c": None if not np.isfinite(self.reference_c) else round(
+                self.reference_c, 4),
+            "range_c": [None if not np.isfinite(v) else round(v, 4) for v in self.range_c],
+            "n_captures": self.n_captures,
+        }
+
+
+def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, float, np.ndarray]:
+    """(β, σ of β[2], residuals) of y ≈ x·β; β None when x is (nearly) rank-deficient."""
+    n, p = x.shape
+    if n <= p:
+        return None, float("inf"), np.zeros(n)
+    if np.linalg.cond(x) > 1e8:
+        return None, float("inf"), np.zeros(n)
+    beta, *_ = np.linalg.lstsq(x, y, rcond=None)
+    res = y - x @ beta
+    s2 = float(res @ res) / (n - p)
+    cov = s2 * np.linalg.inv(x.T @ x)
+    return beta, float(np.sqrt(max(cov[2, 2], 0.0))), res
+
+
+__all__ = ["MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm"]

@@ -1,0 +1,115 @@
+"""The learned heating term indexed by temperature (issue 18, items 3 and 4): face captures
+taken while the module still warms, in distance order, as the thesis bench takes them."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.learning.heating_term import HeatingTerm
+from phonestereo.learning.observation import Observation
+
+#: Disparity offset per °C of module temperature (drift and temperature share the warm-up
+#: curve; random-1006's ~6 px drift over an 8.5 °C rise is ~0.7 px/°C of principal point).
+K_PX_PER_C = 0.5
+
+
+def _temp(t_s: float) -> float:
+    return 25.0 + 10.0 * (1 - np.exp(-t_s / 120.0))  # warm-up curve, τ = 120 s
+
+
+def _faces(report: bool = True, seed: int = 0) -> list[Observation]:
+    """Faces at 1, 2, 3 m (f·B = 18 px·m), 5 captures per distance, 11.5 s apart from 300 s
+    on: a true correction c = 0.3 − 0.05·d + K·(T − T_warm), 0.02 px noise per face."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for g in range(15):
+        z, t = (1.0, 2.0, 3.0)[g // 5], 300.0 + 11.5 * g
+        temp = _temp(t)
+        for _ in range(8):
+            d_true = 18 / z * rng.uniform(0.97, 1.03)
+            x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
+            c = 0.3 - 0.05 * d_true + K_PX_PER_C * (temp - 35.0)
+            out.append(Observation(x, y, d_true - c + rng.normal(0, 0.02), d_true, z,
+                                   "landscape", "", t, temp if report else None, f"c{g}"))
+    return out
+
+
+def _truth(d_measured: float, t_s: float) -> float:
+    # d_measured = d_true − c(d_true, T)  ⇒  c solved for d_true = (d_m + 0.3 + K·ΔT)/1.05
+    dt = K_PX_PER_C * (_temp(t_s) - 35.0)
+    d_true = (d_measured + 0.3 + dt) / 1.05
+    return 0.3 - 0.05 * d_true + dt
+
+
+def test_the_slope_is_learned_from_the_captures_own_temperatures() -> None:
+    term = HeatingTerm.fit(_faces())
+    assert term.ok, term.reason
+    # within 3σ of the truth, and σ small enough to matter (< 20 % of the slope)
+    assert abs(term.slope_px_per_c - K_PX_PER_C) <= 3 * term.slope_sigma
+    assert term.slope_sigma < 0.2 * K_PX_PER_C
+    assert not HeatingTerm.fit(_faces(report=False)).ok  # no temperatures: no term, says why
+    assert "temperature" in HeatingTerm.fit(_faces(report=False)).reason
+
+
+def test_a_later_warmer_capture_is_corrected_within_its_sigma() -> None:
+    """A chart at 4 m (d 4.5 px, below the learned 6–18 px) measured 250 s after the last face,
+    0.2 °C warmer than any face: with the term the correction is right to 2σ; without it the
+    remaining drift (learned as a gain over disparity) is a common-mode error of ~2σ, five
+    times the term's (measured: −0.005 ± 0.022 px with, −0.090 ± 0.047 px without)."""
+    obs, t = _faces(), 650.0
+    q = [[1000.0, 750.0, 4.5]]
+    with_term = Corrector(obs, FlowConfig())
+    c, parts = with_term.correct_parts(q, "landscape", _temp(t))
+    assert "heating" in parts and parts["heating"][0] > 0
+    assert abs(c.value_px[0] - _truth(4.5, t)) <= 2 * c.sigma_px[0]
+    blind = Corrector(obs, replace(FlowConfig(), heating_by_temperature=False))
+    c0 = blind.correct(q, "landscape", _temp(t))
+    err0, err = abs(c0.value_px[0] - _truth(4.5, t)), abs(c.value_px[0] - _truth(4.5, t))
+    assert err0 > 1.5 * c0.sigma_px[0] and err0 > 5 * err
+    assert with_term.heating_corrected(_temp(t)) and not blind.heating_corrected(_temp(t))
+    # A capture that reports no temperature under a learned term carries the learned drift.
+    _, p_none = with_term.correct_parts(q, "landscape", None)
+    assert p_none["heating"][0] >= abs(with_term.heating.slope_px_per_c) * 0.5
+
+
+def test_without_temperatures_the_drift_still_to_come_is_in_sigma() -> None:
+    """The same faces, no temperature reported: the time slope of the learning captures is
+    significant, so the later capture's σ carries the drift still to come on a warm-up curve
+    of the τ the warm-up gate assumes (180 s / 2.6): its error is within 1σ (measured
+    −0.090 ± 0.105 px), where the blind correction put it at 1.9σ (± 0.047 px)."""
+    obs, t = _faces(report=False), 650.0
+    corr = Corrector(obs, FlowConfig())
+    assert not corr.heating.ok and corr.heating_time.ok
+    c, parts = corr.correct_parts([[1000.0, 750.0, 4.5]], "landscape", None, t)
+    assert parts["heating"][0] > 0
+    assert abs(c.value_px[0] - _truth(4.5, t)) <= c.sigma_px[0]
+    # No drift over the learning captures: no time σ (a warm module's σ is not inflated).
+    flat = [replace(o, d_measured_px=o.d_measured_px + K_PX_PER_C * (_temp(o.time_s) - 35.0))
+            for o in obs]
+    assert not Corrector(flat, FlowConfig()).heating_time.ok
+
+
+def test_a_cold_capture_with_a_temperature_is_corrected_not_gated() -> None:
+    """Item 4: with a learned heating term, a capture 60 s after start (cold for the 180 s
+    warm-up gate) that reports its temperature passes the heated gate, saying why; without a
+    temperature it is gated as before."""
+    from phonestereo.flows import application
+    from phonestereo.io import CaptureEntry
+
+    corr = Corrector(_faces(), FlowConfig())
+    img = np.zeros((4, 4), np.uint8)
+
+    def gates(temp: float | None) -> dict[str, tuple[bool, str]]:
+        entry = CaptureEntry(id="v", wide="w.png", tele="t.png", kind="verification",
+                             time_s=60.0, orientation="landscape", focus_mode="manual",
+                             temperature_c=temp)
+        inp = application.ApplicationInputs(None, entry, img, img, corr)  # type: ignore[arg-type]
+        r = application.run(FlowConfig(), inp)
+        return {g.name: (g.passed, g.reason) for g in r.gates}
+
+    passed, reason = gates(_temp(60.0))["heated"]
+    assert passed and "learned heating term" in reason
+    assert not gates(None)["heated"][0]
