@@ -113,11 +113,13 @@ def run_table(
     out_dir: Path,
     progress: Progress | None,
 ) -> AnalysisOutput:
-    """A registry entry's work: ``analyze`` the set, draw the ``figures`` when the table is
-    ok, write ``<name>.json`` and the summary (:func:`write_output`)."""
+    """A registry entry's work: ``analyze`` the set, then when the table is ok draw the
+    ``figures`` and ``summary`` it, otherwise a one-line summary with the reason; write
+    ``<name>.json`` (:func:`write_output`)."""
     tb = analyze(capture_set, progress=progress)
-    files = figures(tb, out_dir) if tb["ok"] else []
-    return write_output(name, tb, files, summary(tb), out_dir)
+    if not tb["ok"]:
+        return write_output(name, tb, [], (f"{name}: no result: {tb['reason']}",), out_dir)
+    return write_output(name, tb, figures(tb, out_dir), summary(tb), out_dir)
 
 
 __all__ = [

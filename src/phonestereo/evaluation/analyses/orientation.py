@@ -231,8 +231,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"orientation: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     lines = [
         f"orientation: {tb['captures_used']}/{tb['captures_total']} captures, "
         f"{tb['corners_in_every_capture']} corners in every capture ({tb['seconds']} s)"

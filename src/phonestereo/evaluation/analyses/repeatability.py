@@ -253,8 +253,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"repeatability: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     b, a = tb["before"], tb["after_normalisation"]
     lines = [
         f"repeatability: {tb['captures_used']}/{tb['captures_total']} attempts of stack "

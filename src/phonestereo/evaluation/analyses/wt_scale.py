@@ -312,8 +312,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"wt-scale: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     fails = sum(r["focus_fail"] for r in tb["captures"])
     lines = [f"wt-scale: {tb['captures_used']}/{tb['captures_total']} attempts of stack "
              f"{tb['focus_group']} ({fails} focus fails), {tb['charts']} chart(s) "
