@@ -13,14 +13,16 @@ same (the fit converges to the same fixed point from either start).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import cv2
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.features.noise_level import NoiseLevel, estimate_noise_level
-from phonestereo.features.saddle import refine_saddle
+from phonestereo.features.noise_level import estimate_noise_level
+from phonestereo.features.saddle import SaddleCorners, refine_saddle
 
 #: The search image keeps its longer side at least this long (px): a 9x6 board spanning a
 #: third of it still has squares of ~30 px there, far above what OpenCV's search needs.
@@ -90,12 +92,10 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> ChessboardDe
         float(np.min(np.linalg.norm(np.diff(grid, axis=0), axis=2))),
     )
     radius = float(np.clip(0.35 * spacing, 2.0, 6.0))
-    noise = estimate_noise_level(image)  # once per image, for every refinement below
-    blur = min(1.5, radius / 3)
-    res = refine_saddle(image, start, radius_px=radius, blur_sigma_px=blur, noise=noise)
-    larger = _extends_beyond(
-        image, res.points.reshape(rows, cols, 2), res.saddle_strength, radius, noise
-    )
+    refine = _refiner(image, radius)
+    res = refine(start)
+    grid = res.points.reshape(rows, cols, 2)
+    larger = _extends_beyond(image.shape, grid, res.saddle_strength, radius, refine)
     if larger:
         return ChessboardDetection(
             False,
@@ -153,8 +153,34 @@ def _search(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
     return corners.reshape(-1, 2).astype(np.float64) * s + (s - 1) / 2
 
 
+def _refiner(image: np.ndarray, radius: float) -> Callable[[np.ndarray], SaddleCorners]:
+    """``refine_saddle`` on ``image`` with window ``radius`` and pre-blur min(1.5, radius/3).
+
+    The image is blurred, and its noise level and saddle-strength floor (refine_saddle's
+    default: 0.2 % of the blurred image's 1–99 % range) computed, once for every call; the
+    results are those of ``refine_saddle(image, points, radius_px=radius, blur_sigma_px=blur)``.
+    """
+    blur = min(1.5, radius / 3)
+    noise = estimate_noise_level(image)
+    f = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), blur)
+    lo, hi = np.percentile(f, [1, 99])
+    return partial(
+        refine_saddle,
+        f,
+        radius_px=radius,
+        blur_sigma_px=0.0,
+        min_strength=2e-3 * max(float(hi - lo), 1e-12),
+        noise=noise,
+        prefilter_sigma_px=blur,
+    )
+
+
 def _extends_beyond(
-    image: np.ndarray, grid: np.ndarray, strength: np.ndarray, radius: float, noise: NoiseLevel
+    shape: tuple[int, ...],
+    grid: np.ndarray,
+    strength: np.ndarray,
+    radius: float,
+    refine: Callable[[np.ndarray], SaddleCorners],
 ) -> str:
     """Name a side past which the chessboard continues (a sub-board was found), or ''.
 
@@ -167,7 +193,7 @@ def _extends_beyond(
         "left": 2 * grid[:, 0] - grid[:, 1],
         "right": 2 * grid[:, -1] - grid[:, -2],
     }
-    h, w = image.shape[:2]
+    h, w = shape[:2]
     typical = float(np.median(strength))
     for name, pts in sides.items():
         inside = (
@@ -178,9 +204,7 @@ def _extends_beyond(
         )
         if inside.sum() < 2:
             continue
-        r = refine_saddle(
-            image, pts[inside], radius_px=radius, blur_sigma_px=min(1.5, radius / 3), noise=noise
-        )
+        r = refine(pts[inside])
         # A continuing board has full-strength saddles; where the outer squares meet the white
         # margin the fit still finds weak ones (0.3–0.47 of typical), so the bar is 0.6.
         strong = r.ok & (r.saddle_strength > 0.6 * typical)
