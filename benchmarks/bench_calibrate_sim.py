@@ -20,7 +20,8 @@ calibrate``), and:
 
 Usage: ``.venv/bin/python benchmarks/bench_calibrate_sim.py [--seeds 20] [--jobs 2] [--iid-reps 8]
 [--json]``
-(20 seeds with 8 iid draws: ~4 min on 2 cores; ``--seeds 2`` for a look).
+(20 seeds with 8 iid draws: 695 s of CPU, ~6 min on 2 idle cores — 29 min wall on the shared
+machine at load 12–15, 2026-11-26; ``--seeds 2`` for a look).
 """
 
 from __future__ import annotations
@@ -139,6 +140,8 @@ def main() -> None:
         out["mono_wide_ours_seconds_median"] / out["mono_wide_opencv_seconds_median"]
     )
     out["render_and_detect_seconds_median"] = _median(boards, "render_and_detect_seconds")
+    for cam, name in enumerate(("wide", "tele")):  # boards found per seed (planned: 18, >= 6)
+        out[f"boards_views_{name}_min"] = float(min(b["views"][cam] for b in boards))
     out["wall_seconds"] = time.perf_counter() - t0
     if args.json:
         print(json.dumps(out))

@@ -10,11 +10,11 @@ import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import Progress
-from rich.table import Table
 
 from phonestereo.calibration.from_images import ImageReport, calibrate_from_images, parse_board
 from phonestereo.calibration.solve import CalibrationOptions, intrinsic_extrinsic_covariance
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import figure_table
 from phonestereo.errors import InputError
 from phonestereo.geometry import LENS_MODELS, Rig
 from phonestereo.io import Calibration, save_calibration
@@ -132,9 +132,7 @@ def calibrate(
     if as_json:
         typer.echo(json.dumps(summary))
         return
-    table = Table(title=f"calibration ({model}) → {out}")
-    table.add_column("figure")
-    table.add_column("value", justify="right")
+    table = figure_table(f"calibration ({model}) → {out}")
     table.add_row("boards found", f"{summary['views_used']} / {summary['images']} images")
     table.add_row("RMS per point (OpenCV)", f"{result.rms_px_per_point:.4f} px")
     table.add_row("RMS per coordinate (mrcal)", f"{result.rms_px_per_coordinate:.4f} px")

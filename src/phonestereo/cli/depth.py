@@ -145,25 +145,16 @@ def print_bench(res: dict[str, Any], title: str) -> None:
         table.add_row(f"{row['distance_m']:.1f} m", *(cell(row.get(k)) for k, _ in stages))
     table.add_row("all", *(cell(res["stages"][k]) for k, _ in stages))
     Console().print(table)
-    if res.get("ablation"):
-        ab = Table(title="ablation: each fix switched the other way in turn")
-        for col in ("change", "median", "p90", "gated"):
-            ab.add_column(col, justify="right")
-        for r in res["ablation"]:
-            med = "–" if r["median_rel_err"] is None else f"{100 * r['median_rel_err']:.2f} %"
-            p90 = "–" if r["p90_rel_err"] is None else f"{100 * r['p90_rel_err']:.2f} %"
-            ab.add_row(r["without"], med, p90, str(r["gated"]))
-        Console().print(ab)
-    if res.get("lookups"):
-        lk = Table(title="learned-correction lookups (thesis Figure 3-31, plus the smooth field)")
-        for col in ("lookup", "median", "p90", "within σ"):
-            lk.add_column(col, justify="right")
-        for r in res["lookups"]:
-            med = "–" if r["median_rel_err"] is None else f"{100 * r['median_rel_err']:.2f} %"
-            p90 = "–" if r["p90_rel_err"] is None else f"{100 * r['p90_rel_err']:.2f} %"
-            ws = "–" if r["within_sigma"] is None else f"{100 * r['within_sigma']:.0f} %"
-            lk.add_row(r["lookup"], med, p90, ws)
-        Console().print(lk)
+    _print_rows(
+        "ablation: each fix switched the other way in turn",
+        ("change", "median", "p90", "gated"),
+        [(r["without"], *_errors(r), str(r["gated"])) for r in res.get("ablation") or ()],
+    )
+    _print_rows(
+        "learned-correction lookups (thesis Figure 3-31, plus the smooth field)",
+        ("lookup", "median", "p90", "within σ"),
+        [(r["lookup"], *_errors(r), _pct(r["within_sigma"], 0)) for r in res.get("lookups") or ()],
+    )
     within = res["stages"].get("within_sigma")
     if within is not None:
         Console().print(f"|Z − Z_true| ≤ σ for {100 * within:.0f} % of the verification captures")
@@ -227,3 +218,25 @@ def evaluate(
 
 
 __all__ = ["clean", "depth", "evaluate", "print_bench"]
+
+
+def _pct(fraction: float | None, digits: int = 2) -> str:
+    """A fraction as a percentage for a table cell; "–" where there is none."""
+    return "–" if fraction is None else f"{100 * fraction:.{digits}f} %"
+
+
+def _errors(row: dict[str, Any]) -> tuple[str, str]:
+    """The median and p90 relative-error cells of an ablation or lookup row."""
+    return _pct(row["median_rel_err"]), _pct(row["p90_rel_err"])
+
+
+def _print_rows(title: str, columns: tuple[str, ...], rows: list[tuple[str, ...]]) -> None:
+    """A right-aligned Rich table of ``rows`` under ``columns``; nothing when there are none."""
+    if not rows:
+        return
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col, justify="right")
+    for row in rows:
+        table.add_row(*row)
+    Console().print(table)

@@ -16,6 +16,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import JSON_SUMMARY
 from phonestereo.errors import InputError
 
 import_app = typer.Typer(
@@ -26,7 +27,7 @@ import_app = typer.Typer(
 app.add_typer(import_app, name="import")
 
 _OUT = typer.Option("--out", "-o", help="New capture-set folder (must not exist or be empty).")
-_JSON = typer.Option("--json", help="Print the summary as JSON.")
+_DUMP = typer.Argument(help="Dump folder: session.json, captures/*.json, images.")
 
 
 def _report(result: Any, as_json: bool) -> None:
@@ -58,11 +59,9 @@ def _run(fn: Any, *args: Any, **kwargs: Any) -> Any:
 
 @import_app.command("android")
 def import_android_command(
-    dump: Annotated[
-        Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")
-    ],
+    dump: Annotated[Path, _DUMP],
     out: Annotated[Path, _OUT],
-    as_json: Annotated[bool, _JSON] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Import an Android Camera2 dump (docs/import-android.md).
 
@@ -78,11 +77,9 @@ def import_android_command(
 
 @import_app.command("apple")
 def import_apple_command(
-    dump: Annotated[
-        Path, typer.Argument(help="Dump folder: session.json, captures/*.json, images.")
-    ],
+    dump: Annotated[Path, _DUMP],
     out: Annotated[Path, _OUT],
-    as_json: Annotated[bool, _JSON] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Import an Apple AVFoundation dump (docs/import-apple.md).
 
@@ -127,7 +124,7 @@ def import_exif_command(
     max_gap_s: Annotated[
         float, typer.Option("--max-gap-s", help="Largest wide/tele capture-time gap of a pair.")
     ] = 1.0,
-    as_json: Annotated[bool, _JSON] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Import plain JPEGs, pairing wide and tele by EXIF capture time (docs/import-exif.md).
 

@@ -12,11 +12,11 @@ from typing import Annotated
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
+from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
 from phonestereo.errors import InputError, StoreError
 from phonestereo.flows.config_file import load_flow_config
 from phonestereo.flows.learning import IpdMode, LearningResult
@@ -65,7 +65,7 @@ def learn(
             "observations as a separate context in the same file instead of refusing.",
         ),
     ] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Learn disparity observations from the face captures of CAPTURE_SET into STORE.
 
@@ -85,13 +85,6 @@ def learn(
     --store fixes.sqlite
     """
     console = Console(stderr=True, soft_wrap=True)
-    columns = (
-        TextColumn("learning"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        TextColumn("{task.fields[capture]}"),
-    )
     try:
         cfg = load_flow_config(config)
         mode = IpdMode.population() if population else IpdMode.chart(ipd_mm)
@@ -99,7 +92,7 @@ def learn(
         cal = load_calibration(calibration)
         with (
             FixStore(store) as fs,
-            Progress(*columns, console=console, transient=True, disable=as_json) as bar,
+            progress_bar("learning", console, field="capture", disable=as_json) as bar,
         ):
             task = bar.add_task("learn", total=None, capture="")
             res = run_learning(

@@ -11,9 +11,9 @@ import numpy as np
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import figure_table
 from phonestereo.errors import InputError
 from phonestereo.features.keypoints import DETECTORS
 from phonestereo.features.match_input import parse_roi
@@ -150,9 +150,7 @@ def match(
         typer.echo(json.dumps(out))
         return
     ms = out["matches"]
-    table = Table(title=f"matches {wide.name} ↔ {tele.name} ({out['frame']} pixels)")
-    table.add_column("figure")
-    table.add_column("value", justify="right")
+    table = figure_table(f"matches {wide.name} ↔ {tele.name} ({out['frame']} pixels)")
     for stage, n in out["counts"].items():
         table.add_row(f"after {stage}", str(n))
     if ms:

@@ -10,10 +10,10 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import require_output_folder
+from phonestereo.cli.widgets import figure_table
 from phonestereo.errors import InputError
 from phonestereo.io import load_calibration, read_gray, write_image
 from phonestereo.rectification import MODES, Rectification, RectifyOptions, check_mode
@@ -120,9 +120,7 @@ def rectify(
     if as_json:
         typer.echo(json.dumps(summary))
         return
-    table = Table(title=f"rectification ({summary['mode']}) → {out}")
-    table.add_column("figure")
-    table.add_column("value", justify="right")
+    table = figure_table(f"rectification ({summary['mode']}) → {out}")
     table.add_row("rectified size", "{}×{} px".format(*summary["size"]))
     table.add_row("f (eq. 4)", f"{summary['f_px']:.2f} px")
     table.add_row("B (eq. 4)", f"{summary['baseline_m'] * 1e3:.3f} mm")

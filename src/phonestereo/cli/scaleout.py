@@ -13,11 +13,12 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import Progress
 from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
+from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -45,16 +46,7 @@ WorkersOpt = Annotated[
 
 
 def _bar(console: Console, what: str, quiet: bool) -> Progress:
-    return Progress(
-        TextColumn(what),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        TextColumn("{task.fields[key]}"),
-        console=console,
-        transient=True,
-        disable=quiet,
-    )
+    return progress_bar(what, console, field="key", disable=quiet)
 
 
 def _fail(console: Console, exc: Exception) -> typer.Exit:
@@ -77,7 +69,7 @@ def batch(
     retry_failed: Annotated[
         bool, typer.Option(help="Rerun inputs whose earlier run failed.")
     ] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Run COMMAND over many capture sets as Dask tasks: one results table, one log per input.
 
@@ -174,7 +166,7 @@ def study(
     ] = False,
     scheduler: SchedulerOpt = None,
     workers: WorkersOpt = 2,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JSON_SUMMARY = False,
 ) -> None:
     """Sample module tolerances, run the bench per sample, rank the tolerances by their effect
     on the depth error: per-sample table, sensitivity table and a tornado figure in OUT.

@@ -16,11 +16,11 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import prepare_capture_set_folder
+from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
 from phonestereo.errors import InputError
 from phonestereo.sim.module import EFFECT_NAMES, ModuleSpec, list_presets, load_module
 from phonestereo.sim.scenarios import SCENARIOS, plan_scenario
@@ -86,7 +86,7 @@ def simulate_command(
             "`phonestereo import` (repeatable).",
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+    as_json: JSON_SUMMARY = False,
     force: Annotated[
         bool,
         typer.Option("--force", help="Replace an earlier capture set in OUT (its files go first)."),
@@ -124,16 +124,8 @@ def simulate_command(
     except InputError as err:
         raise typer.BadParameter(str(err), param_hint="--out") from err
     console = Console(stderr=True)
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        TextColumn("{task.fields[capture]}"),
-        console=console,
-        disable=as_json,
-        transient=False,
-    ) as bar:
+    bar_label = "[bold]{task.description}"
+    with progress_bar(bar_label, console, field="capture", disable=as_json, transient=False) as bar:
         task = bar.add_task(f"{scenario} ({spec.name})", total=len(plan.captures), capture="")
         try:
             result = write_capture_set(

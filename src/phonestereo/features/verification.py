@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -47,6 +46,7 @@ from phonestereo.features._image import (
     noise_sigma,
     pyramid,
 )
+from phonestereo.features.chart_detection import ChartDetection, failed_detection
 from phonestereo.features.circles import Circles, find_circles
 from phonestereo.features.lattice import (
     Lattice,
@@ -60,103 +60,13 @@ from phonestereo.features.lattice import (
 from phonestereo.features.noise_level import estimate_noise_level
 from phonestereo.features.saddle import refine_saddle
 
+__all__ = ["MIN_CORNERS", "ChartDetection", "detect_verification_chart"]
+
 MIN_CORNERS = 12
 _R_MAX = 8.0  # largest saddle-fit window radius, px
 _LOCAL_PX = 0.15  # largest offset of a corner from its 5 × 5 neighbourhood's quadratic, px
 _MAX_ANCHORS = 4  # circle pairs tried as lattice seeds per pyramid level
 _MAX_LEVEL = 4
-
-
-@dataclass(frozen=True, eq=False)
-class ChartDetection:
-    """Labelled corners of a verification chart, or the reason there are none.
-
-    Attributes
-    ----------
-    found : bool
-    reason : str
-        Empty when found (or a note on dropped corners); otherwise what went wrong.
-    ids : ndarray of int, shape (N, 2)
-        Chart (row, col) of each corner (:meth:`VerificationChart.corner_ids` convention).
-    points : ndarray, shape (N, 2)
-        Sub-pixel corner positions (x, y), pixels of the full image.
-    quality : ndarray, shape (N,)
-        Saddle strength √(−det H) of the refined corner, intensity units per px² (higher is
-        sharper; compare corners of one image).
-    pairs_found : tuple of str
-        Names of the circle pairs whose two circles were seen in the lattice.
-    rotation_deg : float
-        In-image angle of the chart's rows (+u axis), degrees from +x towards +y: the angle of
-        the sum of the vectors from each corner to its right neighbour (NaN if not found).
-    stages : dict
-        Counts per stage (circle candidates, pairs, Harris candidates, lattice nodes, squares,
-        dropped corners, pyramid levels).
-    seconds : dict
-        Wall time per stage.
-    circles : dict of str to ndarray, shape (2, 2)
-        Pixel centres (x, y) of the circles of each pair found, in the order of
-        :attr:`CirclePair.centers_uv` (the squares' centres, from the labelled lattice).
-    residual_px : ndarray, shape (N,)
-        Distance of each corner from the quadratic fitted to its 5 × 5 neighbourhood, pixels
-        (noise level ~0.01–0.05 px; corners above 0.15 px are dropped); NaN where the
-        neighbourhood is too small (chart border, image edge).
-    sigma_px : ndarray, shape (N,)
-        Predicted position σ per coordinate from the image noise, pixels
-        (``features.saddle.position_covariance``).
-    """
-
-    found: bool
-    reason: str
-    ids: NDArray[np.int64]
-    points: F64
-    quality: F64
-    pairs_found: tuple[str, ...] = ()
-    rotation_deg: float = float("nan")
-    stages: dict[str, Any] = field(default_factory=dict)
-    seconds: dict[str, float] = field(default_factory=dict)
-    circles: dict[str, F64] = field(default_factory=dict)
-    residual_px: F64 = field(default_factory=lambda: np.zeros(0))
-    sigma_px: F64 = field(default_factory=lambda: np.zeros(0))
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-friendly summary with every corner (row, col, x, y, quality, residual_px,
-        sigma_px)."""
-        nan = np.full(len(self.ids), np.nan)
-        res = self.residual_px if len(self.residual_px) else nan
-        sig = self.sigma_px if len(self.sigma_px) else nan
-        corners = [
-            {
-                "row": int(r),
-                "col": int(c),
-                "x": float(x),
-                "y": float(y),
-                "quality": float(q),
-                "residual_px": round(float(e), 4) if np.isfinite(e) else None,
-                "sigma_px": round(float(sd), 5) if np.isfinite(sd) else None,
-            }
-            for (r, c), (x, y), q, e, sd in zip(
-                self.ids, self.points, self.quality, res, sig, strict=True
-            )
-        ]
-        rot = None if not np.isfinite(self.rotation_deg) else round(self.rotation_deg, 3)
-        return {
-            "found": self.found,
-            "reason": self.reason,
-            "n_corners": len(corners),
-            "pairs_found": list(self.pairs_found),
-            "circles": {k: np.round(v, 3).tolist() for k, v in self.circles.items()},
-            "rotation_deg": rot,
-            "stages": self.stages,
-            "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
-            "corners": corners,
-        }
-
-
-def _fail(reason: str, stages: dict[str, Any], seconds: dict[str, float]) -> ChartDetection:
-    return ChartDetection(
-        False, reason, np.zeros((0, 2), np.int64), np.zeros((0, 2)), np.zeros(0), (), float("nan"),
-        stages, seconds,
-    )
 
 
 def _circle_levels(pyr: list[F32], sigma: float, stages: dict[str, Any]) -> Iterator[Circles]:
@@ -310,7 +220,7 @@ def detect_verification_chart(
             sec["lattice"] = time.perf_counter() - t - sec["circles"]
             return _finish(pyr, chart, lat, sq, hyp, (x0, y0), stages, sec, t0)
     sec["total"] = time.perf_counter() - t0
-    return _fail(reason, stages, sec)
+    return failed_detection(reason, stages, sec)
 
 
 def _anchor_index(lat: Lattice) -> int:
@@ -353,7 +263,7 @@ def _finish(
     bad = res > 0.2 * size0 / k
     stages["dropped_by_fit"] = int(np.count_nonzero(bad))
     if np.count_nonzero(bad) > 0.1 * len(bad):
-        return _fail(
+        return failed_detection(
             f"{int(np.count_nonzero(bad))} of {len(bad)} corners do not follow a smooth "
             "chart-to-image mapping; the lattice is not trustworthy",
             stages,
@@ -403,7 +313,7 @@ def _finish(
     sec["total"] = time.perf_counter() - t0
     dropped = sum(v for k, v in stages.items() if k.startswith("dropped_by"))
     if len(ids) < MIN_CORNERS:
-        return _fail(f"only {len(ids)} corners survived refinement", stages, sec)
+        return failed_detection(f"only {len(ids)} corners survived refinement", stages, sec)
     note = (
         f"{dropped} corner(s) dropped (not clean saddles or off the smooth fit)" if dropped else ""
     )

@@ -34,11 +34,7 @@ def depth_from_disparity(d: Any, f_px: float, baseline_m: float) -> Array:
     >>> float(depth_from_disparity(9.0, 1500.0, 0.012))
     2.0
     """
-    f = require_positive(f_px, "focal length f_px", "pixels")
-    b = require_positive(baseline_m, "baseline_m", "metres")
-    dd = np.asarray(d, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(dd > 0, f * b / dd, np.nan)
+    return _fb_over(d, f_px, baseline_m)
 
 
 def disparity_from_depth(z: Any, f_px: float, baseline_m: float) -> Array:
@@ -49,11 +45,7 @@ def disparity_from_depth(z: Any, f_px: float, baseline_m: float) -> Array:
     >>> float(disparity_from_depth(2.0, 1500.0, 0.012))
     9.0
     """
-    f = require_positive(f_px, "focal length f_px", "pixels")
-    b = require_positive(baseline_m, "baseline_m", "metres")
-    zz = np.asarray(z, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(zz > 0, f * b / zz, np.nan)
+    return _fb_over(z, f_px, baseline_m)
 
 
 def relative_depth_error(z: Any, f_px: float, baseline_m: float, sigma_d_px: Any) -> Array:
@@ -67,3 +59,12 @@ def relative_depth_error(z: Any, f_px: float, baseline_m: float, sigma_d_px: Any
     f = require_positive(f_px, "focal length f_px", "pixels")
     b = require_positive(baseline_m, "baseline_m", "metres")
     return np.asarray(z, dtype=np.float64) * np.asarray(sigma_d_px, dtype=np.float64) / (f * b)
+
+
+def _fb_over(x: Any, f_px: float, baseline_m: float) -> Array:
+    """f·B / x where x > 0, NaN elsewhere (eq. 4 both ways: x is a disparity or a depth)."""
+    f = require_positive(f_px, "focal length f_px", "pixels")
+    b = require_positive(baseline_m, "baseline_m", "metres")
+    xx = np.asarray(x, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(xx > 0, f * b / xx, np.nan)

@@ -52,11 +52,7 @@ def read_gray(path: str | os.PathLike[str]) -> NDArray[np.uint8]:
     InputError
         The file is missing, cannot be decoded or is empty.
     """
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
-    if not p.is_file():
-        raise InputError(f"image file not found: '{p}'; check the path")
+    p = _image_file(path)
     try:
         data = np.fromfile(p, dtype=np.uint8)
     except OSError as exc:
@@ -88,11 +84,7 @@ def image_size(path: str | os.PathLike[str]) -> tuple[int, int]:
     """
     from PIL import Image, UnidentifiedImageError  # header reader; imported only when used
 
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
-    if not p.is_file():
-        raise InputError(f"image file not found: '{p}'; check the path")
+    p = _image_file(path)
     try:
         with Image.open(p) as im:
             w, h = im.size
@@ -199,4 +191,14 @@ def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int =
     tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
     buf.tofile(tmp)
     os.replace(tmp, p)
+    return p
+
+
+def _image_file(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a Path if it names an existing file; InputError naming the fix otherwise."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"'{p}' is a folder, not an image file; give the image's path")
+    if not p.is_file():
+        raise InputError(f"image file not found: '{p}'; check the path")
     return p

@@ -243,25 +243,15 @@ class YamlImport:
 def import_opencv_yaml(
     path: str | os.PathLike[str],
     extrinsics_path: str | os.PathLike[str] | None = None,
-    *,
-    wide_size: tuple[int, int] | None = None,
-    tele_size: tuple[int, int] | None = None,
-    t_unit_m: float = 1.0,
-    first_camera: Literal["wide", "tele"] = "wide",
+    **options: Any,
 ) -> Calibration:
     """Read a stereo calibration from OpenCV FileStorage YAML (or XML/JSON).
 
-    The same as :func:`read_opencv_yaml` (which also says whether R was re-orthonormalised),
-    returning only the calibration.
+    The same as :func:`read_opencv_yaml` (which also says whether R was re-orthonormalised;
+    ``options`` are its keyword arguments ``wide_size``, ``tele_size``, ``t_unit_m``,
+    ``first_camera``), returning only the calibration.
     """
-    return read_opencv_yaml(
-        path,
-        extrinsics_path,
-        wide_size=wide_size,
-        tele_size=tele_size,
-        t_unit_m=t_unit_m,
-        first_camera=first_camera,
-    ).calibration
+    return read_opencv_yaml(path, extrinsics_path, **options).calibration
 
 
 def read_opencv_yaml(

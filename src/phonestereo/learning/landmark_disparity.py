@@ -4,7 +4,8 @@ The learning flow's "landmark disparity estimation" block (Fig. 4-3, 4-4):
 
 1. landmarks of each face in the wide and in the raw tele image (the tele sees faces ×zoom
    larger), their pupils mapped into the rectified frame (``canonical`` mode, §3.3);
-2. the depth of each wide face from its IPD (eq. 11: :func:`~phonestereo.learning.ipd.
+2. (steps 2–3 in :mod:`~phonestereo.learning.face_pairing`) the depth of each wide face
+   from its IPD (eq. 11: :func:`~phonestereo.learning.ipd.
    fit_face_plane` for a printed chart, :func:`~phonestereo.learning.ipd.face_depth` for real
    heads) and the disparity it predicts, ``d_expected = f·B/Z`` (eq. 4, Z along the rectified
    axis);
@@ -27,24 +28,31 @@ never dropped silently.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
-from phonestereo.errors import InputError
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.features.search import ncc_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
-from phonestereo.learning.ipd import IPD_M, face_depth, fit_face_plane
+from phonestereo.learning.face_pairing import DepthMode, ipd_depths, match_faces, pupils_px
+from phonestereo.learning.ipd import IPD_M
 from phonestereo.learning.tele_search import search_start
 from phonestereo.rectification import Rectification
 
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
-DepthMode = Literal["chart", "face"]
+
+__all__ = [
+    "DepthMode",
+    "FaceDisparity",
+    "LandmarkDisparityResult",
+    "ipd_depths",
+    "landmark_disparity",
+    "match_faces",
+]
 
 
 @dataclass(frozen=True)
@@ -118,105 +126,6 @@ class LandmarkDisparityResult:
             "faces": [f.to_dict() for f in self.faces],
             "unmatched": [{"wide_index": i, "reason": r} for i, r in self.unmatched],
         }
-
-
-def _pupils(res: FaceResult) -> F64:
-    return np.array([f.pupils_px for f in res.faces], dtype=np.float64).reshape(-1, 2, 2)
-
-
-def ipd_depths(
-    faces: FaceResult, rect: Rectification, ipd_m: float = IPD_M, mode: DepthMode = "chart"
-) -> tuple[F64, F64]:
-    """IPD depth of each wide face along the rectified axis and its expected disparity.
-
-    Parameters
-    ----------
-    faces : FaceResult
-        Faces of the raw wide image.
-    rect : Rectification
-        The rectification (``canonical`` makes f·B/Z exact).
-    ipd_m : float
-        The IPD, metres.
-    mode : {"chart", "face"}
-        ``"chart"``: all faces on one printed plane (:func:`fit_face_plane`, the chart's tilt
-        instead of the portraits' head yaw); ``"face"``: real heads, each with its own yaw
-        (:func:`face_depth`).
-
-    Returns
-    -------
-    depth_m, d_expected_px : ndarray, shape (N,)
-        Metres and pixels; NaN where the pupils leave the camera's valid field.
-    """
-    pupils = _pupils(faces)
-    if len(pupils) == 0:
-        return np.zeros(0), np.zeros(0)
-    cam = rect.rig.wide
-    z = np.full(len(pupils), np.nan)
-    if mode == "chart":
-        try:
-            fit = fit_face_plane(pupils, cam, ipd_m)
-        except InputError:  # no pupil in the valid field: the per-face fallback says so (NaN)
-            fit = None
-        if fit is not None and not fit.reason:
-            z = np.asarray(fit.depth_m, dtype=np.float64)
-    elif mode != "face":
-        raise InputError(f"depth mode must be 'chart' or 'face', got {mode!r}")
-    bad = ~np.isfinite(z)
-    if bad.any():  # real heads (or a failed plane fit): each face on its own
-        yaw = np.array([f.yaw_rad if np.isfinite(f.yaw_rad) else 0.0 for f in faces.faces])
-        refs = np.array([f.yaw_reference for f in faces.faces])
-        for ref in ("sight", "image"):
-            sel = bad & (refs == ref)
-            if sel.any():
-                z[sel] = face_depth(pupils[sel], cam, ipd_m, yaw[sel], relative_to=ref)
-    mid = cam.unproject(pupils).mean(axis=1)  # (N, 3), z = 1: the pupil midpoint's ray
-    p_rect = (mid * z[:, None]) @ np.asarray(rect.R_rect_wide).T
-    z_rect = p_rect[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d_exp = rect.f_px * rect.baseline_m / z_rect
-    return z_rect, np.where(z_rect > 0, d_exp, np.nan)
-
-
-def match_faces(
-    d: F64,
-    e: F64,
-    d_expected: F64,
-    *,
-    max_e_px: float = 10.0,
-    d_tol_px: float = 4.0,
-    d_tol_rel: float = 0.35,
-) -> list[tuple[int, int]]:
-    """Assign wide faces to tele faces by landmark (d, e) (one-to-one, gated).
-
-    Parameters
-    ----------
-    d, e : ndarray, shape (Nw, Nt)
-        Landmark disparity and non-disparity error of every wide/tele pair, pixels.
-    d_expected : ndarray, shape (Nw,)
-        f·B/Z_IPD of each wide face, pixels.
-    max_e_px, d_tol_px, d_tol_rel : float
-        Gates: |e| ≤ max_e_px and |d − d_expected| ≤ d_tol_px + d_tol_rel · d_expected.
-
-    Returns
-    -------
-    list of (wide_index, tele_index)
-
-    Examples
-    --------
-    Two faces 300 px apart, both at 12 px of disparity; the tele faces listed in reverse:
-
-    >>> d = np.array([[-288.0, 12.2], [11.8, 312.0]])
-    >>> match_faces(d, np.zeros((2, 2)), np.array([12.0, 12.0]))
-    [(0, 1), (1, 0)]
-    """
-    if d.size == 0:
-        return []
-    tol = d_tol_px + d_tol_rel * np.abs(d_expected)[:, None]
-    cost = (e / max_e_px) ** 2 + ((d - d_expected[:, None]) / tol) ** 2
-    ok = np.isfinite(cost) & (np.abs(e) <= max_e_px) & (np.abs(d - d_expected[:, None]) <= tol)
-    big = 1e6
-    rows, cols = linear_sum_assignment(np.where(ok, cost, big))
-    return [(int(i), int(j)) for i, j in zip(rows, cols, strict=True) if ok[i, j]]
 
 
 def _gray32(image: Any) -> F32:
@@ -396,8 +305,8 @@ def landmark_disparity(
     """
     if not faces_wide.found:
         return LandmarkDisparityResult((), 0, len(faces_tele), f"wide: {faces_wide.reason}")
-    pw = rect.points_wide(_pupils(faces_wide))  # (Nw, 2, 2) rectified
-    pt = rect.points_tele(_pupils(faces_tele)).reshape(-1, 2, 2)  # (Nt, 2, 2)
+    pw = rect.points_wide(pupils_px(faces_wide))  # (Nw, 2, 2) rectified
+    pt = rect.points_tele(pupils_px(faces_tele)).reshape(-1, 2, 2)  # (Nt, 2, 2)
     diff = pw[:, None] - pt[None]  # (Nw, Nt, 2 pupils, 2)
     d_lm, e_lm = diff[..., 0].mean(axis=2), diff[..., 1].mean(axis=2)
     z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode)

@@ -4,20 +4,21 @@ kind, writing the JSON table, figure saving, JSON cleaning, per-corner maps."""
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.geometry import Rig
 from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
 
 F64 = np.ndarray
+T = TypeVar("T")
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
@@ -91,11 +92,43 @@ def write_output(
     )
 
 
+def measure_each(
+    caps: Sequence[CaptureEntry], measure: Callable[[CaptureEntry], T], progress: Progress | None
+) -> list[T]:
+    """``measure`` of every capture in order, calling ``progress(done, total, id)`` after each."""
+    out = []
+    for i, c in enumerate(caps):
+        out.append(measure(c))
+        if progress is not None:
+            progress(i + 1, len(caps), c.id)
+    return out
+
+
+def run_table(
+    name: str,
+    analyze: Callable[..., dict[str, Any]],
+    figures: Callable[[dict[str, Any], Path], list[Path]],
+    summary: Callable[[dict[str, Any]], tuple[str, ...]],
+    capture_set: Path,
+    out_dir: Path,
+    progress: Progress | None,
+) -> AnalysisOutput:
+    """A registry entry's work: ``analyze`` the set, then when the table is ok draw the
+    ``figures`` and ``summary`` it, otherwise a one-line summary with the reason; write
+    ``<name>.json`` (:func:`write_output`)."""
+    tb = analyze(capture_set, progress=progress)
+    if not tb["ok"]:
+        return write_output(name, tb, [], (f"{name}: no result: {tb['reason']}",), out_dir)
+    return write_output(name, tb, figures(tb, out_dir), summary(tb), out_dir)
+
+
 __all__ = [
     "captures_of_kind",
     "json_clean",
     "map_panel",
+    "measure_each",
     "open_set",
+    "run_table",
     "save_figure",
     "write_output",
 ]

@@ -36,7 +36,12 @@ from matplotlib.figure import Figure
 
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
-from phonestereo.evaluation.analyses._common import captures_of_kind, open_set, write_output
+from phonestereo.evaluation.analyses._common import (
+    captures_of_kind,
+    measure_each,
+    open_set,
+    write_output,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -114,11 +119,8 @@ def analyze_distortion(
     )
     rects = {mode: Rectification.from_rig(rig, mode) for mode in MODES}
     rect = rects[MODE]
-    ms = []
-    for i, c in enumerate(caps):
-        ms.append(measure_capture(cs, c, rect, min_corners=DEGREE + 3))
-        if progress is not None:
-            progress(i + 1, len(caps), c.id)
+    n_min = DEGREE + 3
+    ms = measure_each(caps, lambda c: measure_capture(cs, c, rect, min_corners=n_min), progress)
     good = [m for m in ms if m.found]
     base = {"analysis": "distortion", "capture_set": str(cs.root), "captures_total": len(ms),
             "captures_used": len(good), "mode": MODE, "degree": DEGREE}

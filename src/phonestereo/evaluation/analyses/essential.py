@@ -43,7 +43,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, write_output
+from phonestereo.evaluation.analyses._common import open_set, run_table
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import measure_capture
 from phonestereo.fixes.essential_compare import (
@@ -280,8 +280,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"essential: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     lines = [f"essential: {len([g for g in tb['groups'].values() if g['ok']])} refocus stack(s), "
              f"{len(tb['captures'])} captures ({tb['seconds']} s)"]
     for g, v in tb["groups"].items():
@@ -307,6 +306,6 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
     """Registry entry: analyse, write ``essential.json`` and the figures into ``out_dir``."""
-    tb = analyze_essential(capture_set, progress=progress)
-    files = write_figures(tb, out_dir) if tb["ok"] else []
-    return write_output("essential", tb, files, _summary(tb), out_dir)
+    return run_table(
+        "essential", analyze_essential, write_figures, _summary, capture_set, out_dir, progress
+    )

@@ -29,7 +29,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, write_output
+from phonestereo.evaluation.analyses._common import open_set, run_table
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.analyses.essential import MIN_ATTEMPTS, measure_stacks
 from phonestereo.fixes.essential_compare import MIN_POINTS, shared_points
@@ -162,8 +162,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"handheld: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     lines = [f"handheld: {len(tb['captures'])} captures ({tb['seconds']} s)"]
     for g, v in tb["groups"].items():
         if not v["ok"]:
@@ -180,6 +179,6 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
     """Registry entry: analyse, write ``handheld.json`` and the figure into ``out_dir``."""
-    tb = analyze_handheld(capture_set, progress=progress)
-    files = write_figures(tb, out_dir) if tb["ok"] else []
-    return write_output("handheld", tb, files, _summary(tb), out_dir)
+    return run_table(
+        "handheld", analyze_handheld, write_figures, _summary, capture_set, out_dir, progress
+    )

@@ -29,7 +29,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, write_output
+from phonestereo.evaluation.analyses._common import measure_each, open_set, write_output
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -148,11 +148,8 @@ def analyze_heating(
     cs, rig = open_set(capture_set)
     caps = _check_needs(cs)
     rect = Rectification.from_rig(rig, "canonical")
-    ms = []
-    for i, c in enumerate(caps):
-        ms.append(measure_capture(cs, c, rect, min_corners=MIN_SAMPLES))
-        if progress is not None:
-            progress(i + 1, len(caps), c.id)
+    n_min = MIN_SAMPLES
+    ms = measure_each(caps, lambda c: measure_capture(cs, c, rect, min_corners=n_min), progress)
     found = [m for m in ms if m.found]
     base = {"analysis": "heating", "capture_set": str(cs.root), "captures_total": len(ms)}
     if len(found) < MIN_SAMPLES:

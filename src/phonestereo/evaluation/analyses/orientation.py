@@ -34,7 +34,7 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, write_output
+from phonestereo.evaluation.analyses._common import measure_each, open_set, run_table
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -118,11 +118,7 @@ def analyze_orientation(
     cs, rig = open_set(capture_set)
     caps, buckets = _check_needs(cs)
     rect = Rectification.from_rig(rig, "canonical")
-    ms = []
-    for i, c in enumerate(caps):
-        ms.append(measure_capture(cs, c, rect))
-        if progress is not None:
-            progress(i + 1, len(caps), c.id)
+    ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     base = {"analysis": "orientation", "capture_set": str(cs.root), "captures_total": len(ms)}
     keep = [i for i, m in enumerate(ms) if m.found]
     ms_ok, bk_ok = [ms[i] for i in keep], [buckets[i] for i in keep]
@@ -235,8 +231,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"orientation: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     lines = [
         f"orientation: {tb['captures_used']}/{tb['captures_total']} captures, "
         f"{tb['corners_in_every_capture']} corners in every capture ({tb['seconds']} s)"
@@ -255,6 +250,6 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
     """Registry entry: analyse, write ``orientation.json`` and the figures into ``out_dir``."""
-    tb = analyze_orientation(capture_set, progress=progress)
-    files = write_figures(tb, out_dir) if tb["ok"] else []
-    return write_output("orientation", tb, files, _summary(tb), out_dir)
+    return run_table(
+        "orientation", analyze_orientation, write_figures, _summary, capture_set, out_dir, progress
+    )

@@ -31,7 +31,13 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import map_panel, open_set, save_figure, write_output
+from phonestereo.evaluation.analyses._common import (
+    map_panel,
+    measure_each,
+    open_set,
+    run_table,
+    save_figure,
+)
 from phonestereo.evaluation.chart_ruler import corner_keys, measure_capture, shared_keys
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.fixes.refocus import averaging_trials, detect_focus_failures, sharpness
@@ -122,11 +128,7 @@ def analyze_repeatability(
     cs, rig = open_set(capture_set)
     caps = stack_entries(cs, "repeatability", "one static verification chart")
     rect = Rectification.from_rig(rig, "canonical")
-    ms = []
-    for i, entry in enumerate(caps):
-        ms.append(measure_capture(cs, entry, rect))
-        if progress is not None:
-            progress(i + 1, len(caps), entry.id)
+    ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     focus = focus_check(cs, caps)
     rows = [
         {
@@ -251,8 +253,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"repeatability: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     b, a = tb["before"], tb["after_normalisation"]
     lines = [
         f"repeatability: {tb['captures_used']}/{tb['captures_total']} attempts of stack "
@@ -275,6 +276,5 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
     """Registry entry: analyse, write ``repeatability.json`` and the figures into ``out_dir``."""
-    tb = analyze_repeatability(capture_set, progress=progress)
-    files = write_figures(tb, out_dir) if tb["ok"] else []
-    return write_output("repeatability", tb, files, _summary(tb), out_dir)
+    analyze, name = analyze_repeatability, "repeatability"
+    return run_table(name, analyze, write_figures, _summary, capture_set, out_dir, progress)

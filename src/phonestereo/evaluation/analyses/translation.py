@@ -32,7 +32,12 @@ from matplotlib.figure import Figure
 
 from phonestereo.charts.verification import VerificationChart
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
-from phonestereo.evaluation.analyses._common import captures_of_kind, open_set, write_output
+from phonestereo.evaluation.analyses._common import (
+    captures_of_kind,
+    measure_each,
+    open_set,
+    write_output,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import corner_keys, match_detections, true_corners
 from phonestereo.features.verification import ChartDetection, detect_verification_chart
@@ -140,11 +145,7 @@ def analyze_translation(
         "10x8-square 18 mm chart near, the standard chart far; tripod), e.g. "
         "`phonestereo simulate dual-depth`",
     )
-    ms = []
-    for i, c in enumerate(caps):
-        ms.append(_measure(cs, c))
-        if progress is not None:
-            progress(i + 1, len(caps), c.id)
+    ms = measure_each(caps, lambda c: _measure(cs, c), progress)
     good = [m for m in ms if m["found"]]
     base: dict[str, Any] = {"analysis": "translation", "capture_set": str(cs.root),
                             "captures_total": len(ms), "captures_used": len(good)}

@@ -31,7 +31,7 @@ from matplotlib.figure import Figure
 from scipy.spatial import cKDTree
 
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, write_output
+from phonestereo.evaluation.analyses._common import measure_each, open_set, run_table
 from phonestereo.evaluation.analyses.repeatability import (
     Progress,
     focus_check,
@@ -231,12 +231,11 @@ def analyze_wt_scale(
     caps = stack_entries(cs, "wt-scale", "one or two static verification charts")
     rect = Rectification.from_rig(rig, "canonical")
     c = np.asarray(rect.tele_rect.K[:2, 2], dtype=np.float64)
-    rows = []
-    for i, entry in enumerate(caps):
-        charts, reason = measure_charts(cs, entry, rect, max_charts)
-        rows.append(_capture_row(entry, charts, reason, c, cs.root, rect))
-        if progress is not None:
-            progress(i + 1, len(caps), entry.id)
+    rows = measure_each(
+        caps,
+        lambda e: _capture_row(e, *measure_charts(cs, e, rect, max_charts), c, cs.root, rect),
+        progress,
+    )
     for r, f in zip(rows, focus_check(cs, caps), strict=True):
         r.update(f)
     base = {"analysis": "wt-scale", "capture_set": str(cs.root), "focus_group": caps[0].focus_group,
@@ -313,8 +312,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
 
 
 def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
-    if not tb["ok"]:
-        return (f"wt-scale: no result: {tb['reason']}",)
+    """The summary lines of an ok table (:func:`run_table` words the others)."""
     fails = sum(r["focus_fail"] for r in tb["captures"])
     lines = [f"wt-scale: {tb['captures_used']}/{tb['captures_total']} attempts of stack "
              f"{tb['focus_group']} ({fails} focus fails), {tb['charts']} chart(s) "
@@ -335,6 +333,6 @@ def _summary(tb: dict[str, Any]) -> tuple[str, ...]:
 
 def run(capture_set: Path, out_dir: Path, progress: Progress | None = None) -> AnalysisOutput:
     """Registry entry: analyse, write ``wt_scale.json`` and the figures into ``out_dir``."""
-    tb = analyze_wt_scale(capture_set, progress=progress)
-    files = write_figures(tb, out_dir) if tb["ok"] else []
-    return write_output("wt-scale", tb, files, _summary(tb), out_dir)
+    return run_table(
+        "wt-scale", analyze_wt_scale, write_figures, _summary, capture_set, out_dir, progress
+    )

@@ -59,6 +59,7 @@ from phonestereo.io.importers.android_schema import (
 from phonestereo.io.importers.common import (
     ImportResult,
     capture_entry,
+    capture_gravity,
     image_size,
     platform_K_to_image,
     read_json,
@@ -290,18 +291,13 @@ def _entry(
             f"{source}: key 'cameras.{wide_id}.android.sensor.timestamp': earlier than the "
             "session's first_frame_timestamp_ns; both must come from the same session clock"
         )
-    gravity = None
-    if cap.accelerometer is not None:
-        try:
-            g = gravity_from_accelerometer(cap.accelerometer, T_dev[wide_id].R)
-        except InputError as exc:
-            raise InputError(f"{source}: {exc}") from exc
-        gravity = (round(g[0], 9), round(g[1], 9), round(g[2], 9))
-    elif cap.orientation is None:
-        raise InputError(
-            f"{source}: key 'accelerometer': required key is missing (or give 'orientation', "
-            "one of the orientation buckets); without it the orientation fix cannot be used"
-        )
+    gravity = capture_gravity(
+        source,
+        "accelerometer",
+        cap.accelerometer,
+        lambda acc: gravity_from_accelerometer(acc, T_dev[wide_id].R),
+        cap.orientation,
+    )
     suffix = {r: here[i][1].suffix.lower() for r, i in (("wide", wide_id), ("tele", tele_id))}
     return capture_entry(
         cap,

@@ -46,6 +46,7 @@ from phonestereo.io.importers.apple_schema import AppleCalibration, AppleCapture
 from phonestereo.io.importers.common import (
     ImportResult,
     capture_entry,
+    capture_gravity,
     image_size,
     nearest_rotation_checked,
     platform_K_to_image,
@@ -216,18 +217,9 @@ def _entry(cap: AppleCapture, source: str, wide_id: str, tele_id: str, t0: float
             f"{source}: key 'cameras.{wide_id}.timestamp_s': earlier than the session's "
             "first_frame_time_s; both must come from the same clock"
         )
-    gravity = None
-    if cap.gravity is not None:
-        try:
-            g = gravity_from_core_motion(cap.gravity)
-        except InputError as exc:
-            raise InputError(f"{source}: {exc}") from exc
-        gravity = (round(g[0], 9), round(g[1], 9), round(g[2], 9))
-    elif cap.orientation is None:
-        raise InputError(
-            f"{source}: key 'gravity': required key is missing (or give 'orientation', one of "
-            "the orientation buckets); without it the orientation fix cannot be used"
-        )
+    gravity = capture_gravity(
+        source, "gravity", cap.gravity, gravity_from_core_motion, cap.orientation
+    )
     sw = Path(shot.image).suffix.lower()
     st = Path(cap.cameras[tele_id].image).suffix.lower()
     return capture_entry(

@@ -25,7 +25,7 @@ from __future__ import annotations
 import os
 import shutil
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -260,6 +260,33 @@ def capture_entry(
         )
     except ValueError as exc:
         raise InputError(f"{source}: {exc}") from exc
+
+
+def capture_gravity(
+    source: str,
+    key: str,
+    raw: Any,
+    to_gravity: Callable[[Any], Any],
+    orientation: str | None,
+) -> tuple[float, float, float] | None:
+    """Gravity of one dumped capture (unit vector, wide camera frame) from its motion record.
+
+    ``raw`` is the record under ``key`` (None: not in the dump), ``to_gravity`` the platform's
+    conversion; without a record the capture must name its ``orientation`` bucket instead
+    (then None). InputError prefixed with ``source`` otherwise.
+    """
+    if raw is None:
+        if orientation is None:
+            raise InputError(
+                f"{source}: key '{key}': required key is missing (or give 'orientation', one of "
+                "the orientation buckets); without it the orientation fix cannot be used"
+            )
+        return None
+    try:
+        g = to_gravity(raw)
+    except InputError as exc:
+        raise InputError(f"{source}: {exc}") from exc
+    return (round(g[0], 9), round(g[1], 9), round(g[2], 9))
 
 
 def read_json(path: Path, what: str) -> Any:

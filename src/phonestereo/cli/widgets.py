@@ -1,0 +1,47 @@
+"""Pieces several commands' output shares: the ``--json`` summary flag, progress bars, tables.
+
+No commands here (``app.discover`` finds none); the commands import these so that one option
+reads the same everywhere and one progress bar looks the same everywhere.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    TextColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+
+#: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
+JSON_SUMMARY = Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+
+
+def progress_bar(
+    label: str, console: Console, *, field: str, disable: bool, transient: bool = True
+) -> Progress:
+    """A bar with ``label``, done/total, time remaining and the task's ``field`` (e.g. the
+    capture id being worked on); ``disable`` under ``--json``."""
+    cols: tuple[ProgressColumn, ...] = (
+        TextColumn(label),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        TextColumn(f"{{task.fields[{field}]}}"),
+    )
+    return Progress(*cols, console=console, transient=transient, disable=disable)
+
+
+def figure_table(title: str) -> Table:
+    """An empty two-column table: a figure's name, and its value right-aligned."""
+    table = Table(title=title)
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    return table
