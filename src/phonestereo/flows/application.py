@@ -118,12 +118,8 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     # A capture whose temperature indexes the learned heating term is corrected, not gated.
     heated = inputs.corrector is not None and config.learned_correction and (
         inputs.corrector.heating_corrected(entry.temperature_c))
-    gates = capture_gates(entry, warmup_s=config.warmup_s,
-                          heating=config.heating_gate and not heated)
-    if heated and config.heating_gate:
-        gates = [Gate("heated", True, f"{entry.temperature_c:.2f} °C: the drift is corrected by "
-                      "the learned heating term, not waited out") if g.name == "heated" else g
-                 for g in gates]
+    gates = capture_gates(entry, warmup_s=config.warmup_s, heating=config.heating_gate,
+                          heating_corrected=heated)
     bad = first_failed(gates)
     if bad is not None:
         return _gated(entry.id, bad.name, bad.reason, gates, seconds=time.perf_counter() - t0)
@@ -182,9 +178,7 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
             "strategy": c.strategy, "median_px": round(float(np.median(corr_v)), 5),
             "sigma_px": round(float(np.median(corr_s)), 5), "n_used": int(np.median(c.n_used)),
         }
-        if entry.temperature_c is not None and inputs.corrector.heating_corrected(
-            entry.temperature_c
-        ):
+        if heated and entry.temperature_c is not None:  # (heated implies a temperature)
             heat = inputs.corrector.heating
             stages["correction"]["heating"] = {
                 **heat.to_dict(),

@@ -89,12 +89,30 @@ def learned_gate(n_observations: int, min_observations: int, bucket: str) -> Gat
 
 
 def capture_gates(
-    entry: CaptureEntry, *, warmup_s: float, heating: bool = True, focus: bool = True
+    entry: CaptureEntry,
+    *,
+    warmup_s: float,
+    heating: bool = True,
+    focus: bool = True,
+    heating_corrected: bool = False,
 ) -> list[Gate]:
     """The capture gates in order (heated, fixed focus, orientation); switched-off gates are
-    reported as passed with the reason "off"."""
+    reported as passed with the reason "off". ``heating_corrected``: the capture's reported
+    temperature indexes a learned heating term, so a cold capture passes the heated gate (its
+    drift is corrected, not waited out)."""
+    if not heating:
+        heat = Gate("heated", True, "off")
+    elif heating_corrected:
+        heat = Gate(
+            "heated",
+            True,
+            f"{entry.temperature_c:.2f} °C: the drift is corrected by the learned heating term, "
+            "not waited out",
+        )
+    else:
+        heat = heated_gate(entry, warmup_s)
     gates = [
-        heated_gate(entry, warmup_s) if heating else Gate("heated", True, "off"),
+        heat,
         fixed_focus_gate(entry) if focus else Gate("fixed-focus", True, "off"),
         orientation_gate(entry),
     ]
