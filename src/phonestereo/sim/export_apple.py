@@ -128,7 +128,7 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
         cams = {}
         for role in ("wide", "tele"):
             shot: dict[str, Any] = {
-                "image": f"images/{c.id}_{IDS[role]}{Path(c.wide).suffix}",
+                "image": f"images/{c.id}_{IDS[role]}{Path(getattr(c, role)).suffix}",
                 "timestamp_s": FIRST_FRAME_S + c.time_s,
                 "focusMode": 0 if c.focus_mode == "manual" else 2,
             }
