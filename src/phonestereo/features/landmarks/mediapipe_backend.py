@@ -44,7 +44,7 @@ from phonestereo.features.landmarks.base import (
     ImageLike,
     LandmarkBackend,
     Rejected,
-    as_rgb,
+    as_gray_or_rgb,
     make_result,
 )
 from phonestereo.features.landmarks.eyes import mediapipe_eyes
@@ -174,14 +174,14 @@ class MediaPipeBackend(LandmarkBackend):
 
     def detect(self, image: ImageLike) -> FaceResult:
         """Faces of one image (array (H, W) gray / (H, W, 3) BGR uint8, or a path)."""
-        rgb = as_rgb(image)
+        rgb = as_gray_or_rgb(image)
         with self._models() as (det, mesh):
             return self._detect(rgb, det, mesh)
 
     def detect_many(self, images: Iterable[ImageLike]) -> list[FaceResult]:
         """Faces of each image, sharing one set of MediaPipe models."""
         with self._models() as (det, mesh):
-            return [self._detect(as_rgb(im), det, mesh) for im in images]
+            return [self._detect(as_gray_or_rgb(im), det, mesh) for im in images]
 
     def _detect(self, rgb: U8, det: Any, mesh: Any) -> FaceResult:
         h, w = rgb.shape[:2]
@@ -215,7 +215,7 @@ class MediaPipeBackend(LandmarkBackend):
         *measure* stage of the module docstring). On a 2000 × 1500 image with a few faces this
         is ~4× faster than :meth:`detect`, whose tiled search is most of the cost.
         """
-        rgb = as_rgb(image)
+        rgb = as_gray_or_rgb(image)
         h, w = rgb.shape[:2]
         faces: list[Face] = []
         rejected: list[Rejected] = []
@@ -276,6 +276,7 @@ class MediaPipeBackend(LandmarkBackend):
         if n != side:
             interp = cv2.INTER_AREA if n < side else cv2.INTER_CUBIC
             crop = cv2.resize(crop, (n, n), interpolation=interp)
+        crop = _to_rgb(crop)  # a gray image is turned into RGB only here, after the resize
         runs = []
         for flip in (False, True) if self.mirror_average else (False,):
             img = np.ascontiguousarray(crop[:, ::-1]) if flip else crop
@@ -315,6 +316,11 @@ class MediaPipeBackend(LandmarkBackend):
         return Face(pupils, centres, pts[:, :2], yaw, score, np.array(box))
 
 
+def _to_rgb(image: U8) -> U8:
+    """An (H, W, 3) RGB view of a gray (H, W) or RGB image (the models take RGB)."""
+    return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) if image.ndim == 2 else image
+
+
 def _central_mesh(res: Any) -> F64 | None:
     """Normalised landmarks (478, 3) of the mesh nearest the crop centre, or None."""
     best, best_d = None, np.inf
@@ -330,7 +336,7 @@ def _find_boxes(rgb: U8, tiles: list[tuple[int, int, int]], det: Any) -> list[Bo
     """Face-detector boxes over all tiles, in full-image pixels (x0, y0, x1, y1, score)."""
     out: list[Box] = []
     for x0, y0, side in tiles:
-        tile = np.ascontiguousarray(rgb[y0 : y0 + side, x0 : x0 + side])
+        tile = _to_rgb(np.ascontiguousarray(rgb[y0 : y0 + side, x0 : x0 + side]))
         th, tw = tile.shape[:2]
         res = det.process(tile)
         for d in res.detections or ():
