@@ -274,6 +274,42 @@ class Rectification:
         for role, img in zip(("wide", "tele"), images, strict=True):
             raw, rect, _ = self._chain(role)
             shrink = raw.f / rect.f
-            mx, my = self._maps(role, None)
-            out.append(maps.remap_image(img, mx, my, shrink, self.options.antialias, interpolation))
+            (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
+            out.append(maps.remap_image(
+                img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
+            ))
         return out[0], out[1]
+
+    def _source(
+        self, role: str, shrink: float, size: tuple[int, int]
+    ) -> tuple[tuple[int, int, int, int], NDArray[np.float32], NDArray[np.float32]]:
+        """The raw box (x0, y0, x1, y1) the maps sample and the maps shifted into it (cached).
+
+        When the image is blurred against aliasing (``antialias``, shrink > 1) only this box is
+        blurred and remapped: a window rectification samples a part of a 12 MP tele. The box
+        holds every tap of every sampled pixel plus the blur's kernel radius, so the result is
+        bit-identical to blurring the whole image (the maps move by whole pixels, exact in
+        float32; tests/rectification/test_rect_source_box.py).
+        """
+        key = (f"source-{role}-{size}", int(self.options.antialias and shrink > 1.0 + 1e-6))
+        if key not in self._cache:
+            mx, my = self._maps(role, None)
+            w, h = size
+            box = (0, 0, w, h)
+            if key[1]:
+                ok = mx != np.float32(maps.INVALID)
+                if ok.any():
+                    # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
+                    m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
+                    lo = np.floor([mx[ok].min(), my[ok].min()]).astype(int) - m
+                    hi = np.ceil([mx[ok].max(), my[ok].max()]).astype(int) + m + 1
+                    box = (max(int(lo[0]), 0), max(int(lo[1]), 0),
+                           min(int(hi[0]), w), min(int(hi[1]), h))
+            if box[2] <= box[0] or box[3] <= box[1]:
+                box = (0, 0, w, h)
+            if box[:2] != (0, 0):
+                mx = np.where(mx == np.float32(maps.INVALID), mx, mx - np.float32(box[0]))
+                my = np.where(my == np.float32(maps.INVALID), my, my - np.float32(box[1]))
+            self._cache[key] = (box, mx, my)  # type: ignore[assignment]
+        box, mx, my = self._cache[key]  # type: ignore[misc]
+        return box, mx, my
