@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
+from phonestereo.features._threads import background
 from phonestereo.features.crlb import sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
 
@@ -47,6 +48,8 @@ _PREFILTER = np.sqrt(3.0) * _Z ** np.abs(np.arange(-_TAPS, _TAPS + 1))
 PREFILTER_MARGIN = _TAPS + 2
 N_PARAMS = 6  # d, e, gain, offset, s_x, s_y
 _SIXTH = np.float32(1.0 / 6.0)
+#: From this many windows refine_lk fits two halves, the second on the helper thread.
+SPLIT_AT = 96
 
 
 def bspline_coefficients(image: F32) -> F32:
@@ -269,8 +272,28 @@ def refine_lk(
     x0, y0 = xy[:, 0], xy[:, 1]
     if n and (x0.min() < r or y0.min() < r or x0.max() >= w - r or y0.max() >= h - r):
         raise InputError(f"windows of radius {r} must lie inside the left image {w}×{h}")
+    left = np.asarray(left, np.float32)
+    d0, e0 = np.broadcast_to(d0, (n,)), np.broadcast_to(e0, (n,))
+    opts = (r, sigma_w, slant, max_slant, max_iter, tol, max_step, influence)
+    if n < SPLIT_AT:
+        return _refine(left, right_coef, xy, d0, e0, *opts)
+    # Two halves always (the same numbers with one thread or two), the second on the other
+    # core: the windows are independent and NumPy releases the GIL in their array work.
+    k = n // 2
+    other = background(_refine, left, right_coef, xy[k:], d0[k:], e0[k:], *opts)
+    first = _refine(left, right_coef, xy[:k], d0[:k], e0[:k], *opts)
+    return Refinement.concat([first, other.result()])
+
+
+def _refine(
+    left: F32, right_coef: F32, xy: I64, d0: F64, e0: F64, r: int, sigma_w: float, slant: bool,
+    max_slant: float, max_iter: int, tol: float, max_step: float, influence: bool,
+) -> Refinement:
+    """:func:`refine_lk` of a batch of windows (checked inside ``left``)."""
+    n = len(xy)
+    x0, y0 = xy[:, 0], xy[:, 1]
     npar = N_PARAMS if slant else 4
-    tmpl, tgx, tgy = _image_gradients(np.asarray(left, np.float32), x0, y0, r)
+    tmpl, tgx, tgy = _image_gradients(left, x0, y0, r)
     wts = gaussian_window(r, sigma_w).ravel()
     wn = wts / wts.sum()
     u = np.arange(-r, r + 1, dtype=np.float64)
