@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -297,12 +298,13 @@ class Rectification:
             w, h = size
             box = (0, 0, w, h)
             if key[1]:
-                ok = mx != np.float32(maps.INVALID)
-                if ok.any():
+                ok = cv2.compare(mx, float(maps.INVALID), cv2.CMP_NE)  # uint8 mask
+                if cv2.countNonZero(ok):
                     # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
                     m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
-                    lo = np.floor([mx[ok].min(), my[ok].min()]).astype(int) - m
-                    hi = np.ceil([mx[ok].max(), my[ok].max()]).astype(int) + m + 1
+                    (x_lo, x_hi, *_), (y_lo, y_hi, *_) = (cv2.minMaxLoc(a, ok) for a in (mx, my))
+                    lo = np.floor([x_lo, y_lo]).astype(int) - m
+                    hi = np.ceil([x_hi, y_hi]).astype(int) + m + 1
                     box = (max(int(lo[0]), 0), max(int(lo[1]), 0),
                            min(int(hi[0]), w), min(int(hi[1]), h))
             if box[2] <= box[0] or box[3] <= box[1]:
