@@ -134,6 +134,12 @@ def sample_windows(
     return val.reshape(n, m, m), ok
 
 
+def _wsum(a: NDArray[np.floating], w: NDArray[np.floating]) -> NDArray[np.floating]:
+    """Σ_p a[k, p]·w[p] per row without BLAS: a threaded gemv wakes a second thread per call,
+    which under load cost more than the sum (half the matcher's CPU at 2000 × 1500)."""
+    return np.einsum("kp,p->k", a, w)
+
+
 def gaussian_window(radius: int, sigma_w: float) -> F64:
     """Weights exp(−(u² + v²) / 2σ²) on the (2r + 1)² window, peak 1, shape (M, M)."""
     u = np.arange(-radius, radius + 1, dtype=np.float64)
@@ -323,16 +329,16 @@ def _refine(
         val32 = val.reshape(len(active), -1)
         t = tmpl[active]
         if it == 0:  # photometric start: match the weighted mean and standard deviation
-            mt, mr = t @ wn32, val32 @ wn32
-            st = np.sqrt(np.maximum(((t - mt[:, None]) ** 2) @ wn32, 0))
-            sr = np.sqrt(np.maximum(((val32 - mr[:, None]) ** 2) @ wn32, 0))
+            mt, mr = _wsum(t, wn32), _wsum(val32, wn32)
+            st = np.sqrt(np.maximum(_wsum((t - mt[:, None]) ** 2, wn32), 0))
+            sr = np.sqrt(np.maximum(_wsum((val32 - mr[:, None]) ** 2, wn32), 0))
             th[:, 2] = st / np.maximum(sr, 1e-6)
             th[:, 3] = mt - th[:, 2] * mr
         v64 = val32.astype(np.float64)
         a, b = th[:, 2].copy(), th[:, 3].copy()
         g1 = gram1[active]
         pv = np.einsum("kqp,kp->kq", bw[active], v64)  # Σ w b_i R
-        rr, rl = (v64 * v64) @ wts, (v64 * t64[active]) @ wts  # Σ w R², Σ w R L
+        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[active], wts)  # Σ w R², Σ w R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
@@ -358,25 +364,25 @@ def _refine(
             g2 = _gram(
                 gram2[ai],
                 np.einsum("kqp,kp->kq", bw[ai], v64[i] * wts),
-                (v64[i] ** 2) @ (wts**2),
+                _wsum(v64[i] ** 2, wts**2),
             )
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())
             cov[ai] = c_cov[:, :2, :2]
             res = t64[ai] - a[i, None] * v64[i] - b[i, None]
-            rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
+            rvar[ai] = _wsum(res * res, wts) / np.maximum(dof, 1.0)
             if influence:  # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]
                 resid[ai] = res
                 hc, _ = solve_spd(hess[i], c)
                 full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
                 infl[ai] = hc[:, :2] @ full
-            tc = t[i] - (t[i] @ wn32)[:, None]
-            vc = val32[i] - (val32[i] @ wn32)[:, None]
-            den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
-            zncc[ai] = ((tc * vc) @ wn32) / np.maximum(den, 1e-12)
+            tc = t[i] - _wsum(t[i], wn32)[:, None]
+            vc = val32[i] - _wsum(val32[i], wn32)[:, None]
+            den = np.sqrt(_wsum(tc**2, wn32) * _wsum(vc**2, wn32))
+            zncc[ai] = _wsum(tc * vc, wn32) / np.maximum(den, 1e-12)
             ok_out[ai] = True
         active = active[~(fin | bad)]
-    tc = tmpl - (tmpl @ wn)[:, None]
+    tc = tmpl - _wsum(tmpl, wn)[:, None]
     return Refinement(
         d=theta[:, 0].copy(),
         e=theta[:, 1].copy(),
@@ -388,7 +394,7 @@ def _refine(
         cov_unit=cov,
         residual_var=rvar,
         zncc=zncc,
-        template_std=np.sqrt((tc**2) @ wn),
+        template_std=np.sqrt(_wsum(tc**2, wn)),
         influence=infl if influence else None,
         residual=resid if influence else None,
     )
