@@ -27,6 +27,8 @@ band-limited texture shifted by an exact Fourier shift the bias is < 0.004 px at
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -48,8 +50,7 @@ _PREFILTER = np.sqrt(3.0) * _Z ** np.abs(np.arange(-_TAPS, _TAPS + 1))
 PREFILTER_MARGIN = _TAPS + 2
 N_PARAMS = 6  # d, e, gain, offset, s_x, s_y
 _SIXTH = np.float32(1.0 / 6.0)
-#: From this many windows refine_lk fits two halves, the second on the helper thread.
-SPLIT_AT = 96
+SPLIT_AT = 96  #: from this many windows, two halves (the second on the helper thread)
 
 
 def bspline_coefficients(image: F32) -> F32:
@@ -134,9 +135,8 @@ def sample_windows(
     return val.reshape(n, m, m), ok
 
 
-def _wsum(a: NDArray[np.floating], w: NDArray[np.floating]) -> NDArray[np.floating]:
-    """Σ_p a[k, p]·w[p] per row without BLAS: a threaded gemv wakes a second thread per call,
-    which under load cost more than the sum (half the matcher's CPU at 2000 × 1500)."""
+def _wsum(a: NDArray[Any], w: NDArray[Any]) -> NDArray[Any]:
+    """Σ_p a[k, p]·w[p] per row, without BLAS (its gemv wakes a second thread per call)."""
     return np.einsum("kp,p->k", a, w)
 
 
@@ -283,8 +283,8 @@ def refine_lk(
     opts = (r, sigma_w, slant, max_slant, max_iter, tol, max_step, influence)
     if n < SPLIT_AT:
         return _refine(left, right_coef, xy, d0, e0, *opts)
-    # Two halves always (the same numbers with one thread or two), the second on the other
-    # core: the windows are independent and NumPy releases the GIL in their array work.
+    # two halves always (the same numbers with one thread or two), the second on the helper
+    # thread: independent windows, and NumPy releases the GIL in their array work
     k = n // 2
     other = background(_refine, left, right_coef, xy[k:], d0[k:], e0[k:], *opts)
     first = _refine(left, right_coef, xy[:k], d0[:k], e0[:k], *opts)
@@ -296,8 +296,7 @@ def _refine(
     max_slant: float, max_iter: int, tol: float, max_step: float, influence: bool,
 ) -> Refinement:
     """:func:`refine_lk` of a batch of windows (checked inside ``left``)."""
-    n = len(xy)
-    x0, y0 = xy[:, 0], xy[:, 1]
+    n, x0, y0 = len(xy), xy[:, 0], xy[:, 1]
     npar = N_PARAMS if slant else 4
     tmpl, tgx, tgy = _image_gradients(left, x0, y0, r)
     wts = gaussian_window(r, sigma_w).ravel()
