@@ -297,11 +297,11 @@ class Rectification:
             mx, my = self._maps(role, None)
             w, h = size
             box = (0, 0, w, h)
-            if key[1]:
+            # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
+            m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
+            if key[1] and not _corners_span(mx, my, m, size):
                 ok = cv2.compare(mx, float(maps.INVALID), cv2.CMP_NE)  # uint8 mask
                 if cv2.countNonZero(ok):
-                    # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
-                    m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
                     (x_lo, x_hi, *_), (y_lo, y_hi, *_) = (cv2.minMaxLoc(a, ok) for a in (mx, my))
                     lo = np.floor([x_lo, y_lo]).astype(int) - m
                     hi = np.ceil([x_hi, y_hi]).astype(int) + m + 1
@@ -315,3 +315,16 @@ class Rectification:
             self._cache[key] = (box, mx, my)  # type: ignore[assignment]
         box, mx, my = self._cache[key]  # type: ignore[misc]
         return box, mx, my
+
+
+def _corners_span(mx: NDArray[np.float32], my: NDArray[np.float32], margin: int,
+                  size: tuple[int, int]) -> bool:
+    """True when the maps' valid corner values, ± ``margin``, already reach every image border:
+    the box of all values (which holds the corners') is then the whole image (no search)."""
+    cx, cy = mx[[0, 0, -1, -1], [0, -1, 0, -1]], my[[0, 0, -1, -1], [0, -1, 0, -1]]
+    ok = cx != np.float32(maps.INVALID)
+    if not ok.any():
+        return False
+    cx, cy = cx[ok], cy[ok]
+    return bool(cx.min() - margin <= 0 and cy.min() - margin <= 0
+                and cx.max() + margin + 1 >= size[0] and cy.max() + margin + 1 >= size[1])
