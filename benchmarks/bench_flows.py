@@ -526,23 +526,32 @@ def landmark_variants(
     images: dict[str, tuple[np.ndarray, np.ndarray]], cal: Any
 ) -> list[dict[str, Any]]:
     """``detect_pair(wide, tele[, guide])`` per face capture under each of
-    :data:`LANDMARK_VARIANTS`: median ms and the faces found (wide + tele, summed)."""
+    :data:`LANDMARK_VARIANTS`: median ms (wall and process CPU) and the faces found (wide +
+    tele, summed). The variants take turns on each capture after one untimed pass (a shared
+    machine's load drifts; the first image of a new size costs MediaPipe a re-allocation)."""
     guide = WideToTeleGuide(reference_rectification(cal.rig, FlowConfig().mode))
-    blank = np.full((240, 320), 128, np.uint8)
-    out = []
-    for label, factory, guided in LANDMARK_VARIANTS:
+    backends = []
+    first = next(iter(images.values()))
+    for _label, factory, guided in LANDMARK_VARIANTS:
         mp = factory()
-        mp.detect_many([blank, blank])  # model load outside the timing
-        ts, n_wide, n_tele = [], 0, 0
-        for w, t in images.values():
-            t0 = time.perf_counter()
+        mp.detect_pair(*first, guide if guided else None)  # model load and warm-up, untimed
+        backends.append((mp, guided))
+    stats = [{"ms": [], "cpu": [], "wide": 0, "tele": 0} for _ in backends]
+    for w, t in images.values():
+        for (mp, guided), st in zip(backends, stats, strict=True):
+            t0, c0 = time.perf_counter(), time.process_time()
             fw, ft = mp.detect_pair(w, t, guide if guided else None)
-            ts.append(time.perf_counter() - t0)
-            n_wide, n_tele = n_wide + len(fw.faces), n_tele + len(ft.faces)
-        out.append({"variant": label, "median_ms": round(1000 * float(np.median(ts)), 1),
-                    "faces_found": n_wide + n_tele, "wide_faces": n_wide,
-                    "tele_faces": n_tele})
-    return out
+            st["ms"].append(time.perf_counter() - t0)
+            st["cpu"].append(time.process_time() - c0)
+            st["wide"] += len(fw.faces)
+            st["tele"] += len(ft.faces)
+    return [
+        {"variant": label, "median_ms": round(1000 * float(np.median(st["ms"])), 1),
+         "median_cpu_ms": round(1000 * float(np.median(st["cpu"])), 1),
+         "faces_found": st["wide"] + st["tele"], "wide_faces": st["wide"],
+         "tele_faces": st["tele"]}
+        for (label, _f, _g), st in zip(LANDMARK_VARIANTS, stats, strict=True)
+    ]
 
 
 # --- main -----------------------------------------------------------------------------------
@@ -610,8 +619,8 @@ def _print(res: dict[str, Any]) -> None:
           f"{lr['median_rest_cached_landmarks_ms']:10.1f}")
     for v in lr["landmark_variants"]:
         label = f"  landmarks only: {v['variant']}, ms"
-        print(f"{label:60s} {v['median_ms']:8.1f}   faces wide {v['wide_faces']}, "
-              f"tele {v['tele_faces']}")
+        print(f"{label:60s} {v['median_ms']:8.1f}   CPU {v.get('median_cpu_ms', '-')}, "
+              f"faces wide {v['wide_faces']}, tele {v['tele_faces']}")
     print("\napplication phase blocks (cProfile, cumulative ms per capture):")
     for b in a["blocks_profiled"]:
         print(f"  {b['block']:44s} {b['ms_per_capture']:8.2f}")
