@@ -56,7 +56,7 @@ def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
     by a parabola per axis; |dx|, |dy| ≤ r."""
     score = cv2.matchTemplate(search, tpl, cv2.TM_CCOEFF_NORMED)
     r = (score.shape[0] - 1) // 2
-    i, j = np.unravel_index(int(np.argmax(score)), score.shape)
+    i, j = (int(v) for v in np.unravel_index(int(np.argmax(score)), score.shape))
 
     def vertex(c: Any, k: int) -> float:
         if 0 < k < len(c) - 1:
@@ -103,7 +103,7 @@ def _aligned_tiles(
                 continue
             tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
             dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
-            M = np.float32([[1, 0, r + dx], [0, 1, r + dy]])  # out(u, v) = tb(u + r + dx, …)
+            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)  # out(u, v) = tb(u + r + dx, …)
             tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REFLECT)
             out.append((ta, tb))
