@@ -103,7 +103,8 @@ def _aligned_tiles(
                 continue
             tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
             dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
-            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)  # out(u, v) = tb(u + r + dx, …)
+            # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
+            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
             tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REFLECT)
             out.append((ta, tb))
