@@ -122,6 +122,28 @@ class MatchConfig:
     min_cfa : float
         Phase contrast of both images above which ``cfa_filter`` acts: demosaiced images
         measure 0.5–1.0 (ISP renders, re-mosaiced Middlebury), others 0.01–0.03.
+    wide_floor : float
+        A pair whose misfit floor (``typical_misfit``) reads at least this is compression-
+        limited, and its sub-pixel fit is redone with the wide window below. 5: JPEG q85 / q70
+        read 8.7 / 22 (Adirondack), 6.0 / 12.8 (Piano), 10 / 19 (motorcycle) and the phone
+        pairs above it, while the clean pairs read 1–2.3, JPEG q95 1.9–3.6 and the denoised
+        right images 1.7–4.4 (their misfit is lost texture, which a larger window does not
+        average away). There the quantisation error, not the sensor noise, is the window's
+        residual: it is spread over the 8 × 8 blocks' high frequencies, so σ_d falls with the
+        window's area and with damping the frequencies the quantiser coarsened. Adirondack
+        q85 / q70 0.0410 / 0.0613 → 0.0262 / 0.0371 px median error, Piano q70 0.1205 → 0.0912;
+        phone_wide_ultra 79–252 → 97–302 matches per pair, LR/RL RMS z 0.47–0.92 →
+        0.45–1.00. Its cost: the motorcycle's depth edges, q85 / q70 0.0857 / 0.0925 → 0.1009 /
+        0.1087 px (within the issue's 1.5 × clean).
+    wide_radius, wide_sigma_w : int, float
+        The compression-limited fit's window half size and Gaussian weight σ, px (23 × 23,
+        σ_w 5; the NCC search keeps ``radius``). 19 × 19 (σ_w 4) reads 0.0453 px on Adirondack
+        q70, over the 0.0388 limit; 29 × 29 (σ_w 6.5) 0.0414 without the prefilter.
+    wide_prefilter_px : float
+        Gaussian σ applied to both images before the compression-limited fit, px (a symmetric
+        blur does not move d; the noise model is scaled by its Σk², so the floor keeps its
+        meaning). 0.5: Adirondack q70 0.0434 → 0.0370 px at 23 × 23; 1.0 leaves few windows
+        whose residual fits the (then tiny) computed noise.
     """
 
     detector: str = "dog"
@@ -164,6 +186,10 @@ class MatchConfig:
     normalized_tail: float = 2.0
     cfa_filter: bool = True
     min_cfa: float = 0.2
+    wide_floor: float = 5.0
+    wide_radius: int = 11
+    wide_sigma_w: float = 5.0
+    wide_prefilter_px: float = 0.5
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:
@@ -190,6 +216,10 @@ class MatchConfig:
             raise InputError(f"row_tolerance must be an integer >= 0, got {self.row_tolerance}")
         if self.noise_sigma is not None and not self.noise_sigma > 0:
             raise InputError(f"noise_sigma must be > 0 DN or None, got {self.noise_sigma}")
+        if int(self.wide_radius) != self.wide_radius or not 2 <= self.wide_radius <= 32:
+            raise InputError(f"wide_radius must be an integer 2..32 px, got {self.wide_radius}")
+        if not self.wide_sigma_w > 0 or self.wide_prefilter_px < 0:
+            raise InputError("wide_sigma_w must be > 0 and wide_prefilter_px >= 0")
         if not 0 < self.sigma_w or self.max_keypoints < 1:
             raise InputError("sigma_w must be > 0 and max_keypoints >= 1")
 
@@ -220,6 +250,9 @@ class MatchResult:
     cfa_filtered : bool
         Both images carried a CFA phase and were filtered before the sub-pixel fit
         (``MatchConfig.cfa_filter``).
+    radius : int
+        Window half size of the sub-pixel fit, px: ``MatchConfig.radius``, or ``wide_radius``
+        when the pair's misfit floor said it is compression-limited (0 when nothing was fitted).
     roi : (int, int, int, int)
         (x, y, w, h) searched, left pixels.
     seconds : float
@@ -242,6 +275,7 @@ class MatchResult:
     reason: str = ""
     blur_added: tuple[float, float] = (0.0, 0.0)
     cfa_filtered: bool = False
+    radius: int = 0
 
     def __post_init__(self) -> None:
         for name in ("xy", "d", "e", "sigma_d", "sigma_e", "score", "zncc"):
@@ -266,6 +300,7 @@ class MatchResult:
             "noise_sigma": [round(s, 4) for s in self.noise_sigma],
             "blur_added": [round(s, 3) for s in self.blur_added],
             "cfa_filtered": self.cfa_filtered,
+            "radius": self.radius,
             "roi": list(self.roi),
             "reason": self.reason,
         }
