@@ -111,16 +111,19 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
     assert len(rows) == 16
     n100 = sum(r["matches"] >= 100 for r in rows)
     # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured with the default MatchConfig
-    # (the misfit floor in input-noise units, also after blur equalisation) 94–252, ≥ 100 on
-    # 15 of 16 (0–22 per pair when the floor was skipped after equalisation)
+    # (the misfit floor in input-noise units, also after blur equalisation; the pairs' floors
+    # are ≥ 5, so the compression-limited 23 × 23 fit applies) 97–302, ≥ 100 on 15 of 16
+    # (79–252 with the 15 × 15 fit; 0–22 per pair when the floor was skipped after
+    # equalisation)
     assert n100 >= 0.8 * len(rows), [r["matches"] for r in rows]
     # the rows line up to within the third party's calibration: measured median |e| 0.2–2.0 px
     assert all(r["median_abs_e_px"] < 3.0 for r in rows), [r["median_abs_e_px"] for r in rows]
     z = np.array([r["rms_z"] for r in rows])
-    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.47–0.92 (median
-    # 0.65) on 40–151 paired matches per pair. (Before the pairing used y' + e instead of
-    # y' − e: only the matches with |e| < 0.5 px paired on pairs whose rows are 1.5–2 px off,
-    # mostly wrong ones, and RMS z read 2–3 there.) The upper bound holds on every pair
+    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.45–1.00 (median
+    # 0.82) on 36–119 paired matches per pair (0.47–0.92, median 0.65, with the 15 × 15 fit).
+    # (Before the pairing used y' + e instead of y' − e: only the matches with |e| < 0.5 px
+    # paired on pairs whose rows are 1.5–2 px off, mostly wrong ones, and RMS z read 2–3
+    # there.) The upper bound holds on every pair
     assert np.all(z <= 1.25), z
     assert np.all(z >= 0.4), z
 
@@ -129,9 +132,9 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
 # on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
 # are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
 # 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
-# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16
-# pairs below 0.8)
-@pytest.mark.xfail(strict=True, reason="RMS z 0.47–0.92 per pair: common ISP misfit cancels")
+# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (7 of 16
+# pairs below 0.8: 0.45–0.79; 13 of 16 with the 15 × 15 fit)
+@pytest.mark.xfail(strict=True, reason="RMS z 0.45–1.00 per pair: common ISP misfit cancels")
 def test_real_phone_pairs_consistency_lower_bound(phone_rows: list[dict]) -> None:
     z = np.array([r["rms_z"] for r in phone_rows])
     assert np.all(z >= 0.8), z

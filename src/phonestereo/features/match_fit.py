@@ -64,6 +64,7 @@ def fit_windows(
     sigma_w: float,
     nm: NoiseModel,
     cfg: MatchConfig,
+    correlated: bool = False,
 ) -> Fit:
     """The sub-pixel fit of the windows, the noise cap and the pair's misfit floor."""
     ref = refine_lk(
@@ -79,7 +80,7 @@ def fit_windows(
         max_slant=cfg.max_slant,
         max_iter=cfg.max_iter,
         tol=cfg.tol,
-        influence=cfg.correlated_misfit,
+        influence=correlated,
     )
     ok = ref.converged & (np.abs(ref.d - d0) <= cfg.max_shift)
     ok &= np.abs(ref.e - e0) <= cfg.max_shift

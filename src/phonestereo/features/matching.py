@@ -184,7 +184,8 @@ def match_rectified(
         shift_noise = (shift_noise[0] * sf[0], shift_noise[1] * sf[1])
     coef = right_prep.result()[1] if added[1] == 0 and not cfa else bspline_coefficients(rc)
     models = NoiseModel(noise, noise_in, shift_noise)
-    fit = fit_windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w, models, cfg)
+    corr = cfg.correlated_misfit
+    fit = fit_windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w, models, cfg, corr)
     wide = cfg.misfit_floor and fit.floor >= cfg.wide_floor and cfg.wide_radius > r
     if wide:  # compression-limited: a larger window, the quantiser's high frequencies damped
         l_wide, gain = gaussian_blur(lc, cfg.wide_prefilter_px)
@@ -194,6 +195,10 @@ def match_rectified(
         p = xy[idx]
         idx = idx[(p[:, 0] >= r) & (p[:, 1] >= r) & (p[:, 0] < ww - r) & (p[:, 1] < hh - r)]
         models = NoiseModel(*(scaled(m, gain) for m in (noise, noise_in, shift_noise)))
+        # the quantiser's residual is correlated over its blocks and the prefilter: σ_d from
+        # its pooled autocorrelation, not as if the 23 × 23 pixels were independent (not after
+        # a blur equalisation, whose even misfit the autocorrelation would read as noise)
+        corr = corr or (cfg.wide_correlated and added == (0.0, 0.0))
         fit = fit_windows(
             l_wide,
             bspline_coefficients(r_wide),
@@ -204,6 +209,7 @@ def match_rectified(
             cfg.wide_sigma_w,
             models,
             cfg,
+            corr,
         )
     ref, ok, floor, nbound = fit.ref, fit.ok.copy(), fit.floor, fit.nbound
     noise, shift_noise, noise_var = fit.noise, fit.shift_noise, fit.noise_var
@@ -213,7 +219,7 @@ def match_rectified(
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None
-    if cfg.correlated_misfit and ref.residual is not None and ref.influence is not None:
+    if corr and ref.residual is not None and ref.influence is not None:
         rho = residual_correlation(ref.residual[ok], 2 * r + 1)
         fd = correlation_factor(ref.influence[:, 0], rho)
         fe = correlation_factor(ref.influence[:, 1], rho)

@@ -359,6 +359,14 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "0.5: damps the frequencies the quantiser coarsened (Adirondack q70 0.043 -> 0.037 "
             "px); 1.0 leaves few windows.",
         ),
+        "wide_correlated": (
+            "bool",
+            "In the compression-limited fit, σ_d from the residual's pooled autocorrelation "
+            "(as correlated_misfit), whatever correlated_misfit says; not after blur "
+            "equalisation.",
+            "On: the quantiser's error is correlated over its blocks; Adirondack q85/q70 within "
+            "σ 0.44/0.40 -> 0.52/0.50.",
+        ),
     },
 }
 
