@@ -41,8 +41,8 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
 from phonestereo.features._threads import background
-from phonestereo.features.blur import equalise_pair, gaussian_blur
-from phonestereo.features.cfa import cfa_phase_contrast, suppress_cfa
+from phonestereo.features.blur import equalise_pair, gaussian_blur, gaussian_kernel
+from phonestereo.features.cfa import cfa_phase_contrast, shift_noise_factor, suppress_cfa
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
@@ -194,7 +194,14 @@ def match_rectified(
         hh, ww = lc.shape
         p = xy[idx]
         idx = idx[(p[:, 0] >= r) & (p[:, 1] >= r) & (p[:, 0] < ww - r) & (p[:, 1] < hh - r)]
-        models = NoiseModel(*(scaled(m, gain) for m in (noise, noise_in, shift_noise)))
+        # the shift sees the prefiltered noise as white noise of variance ρ·σ² (ρ from the
+        # images' own gradient spectra, features/cfa.py), more than the per-pixel Σk² says
+        taps = gaussian_kernel(cfg.wide_prefilter_px)
+        rl, rr = (
+            shift_noise_factor(im, n, kernel=taps) for im, n in zip((lc, rc), noise, strict=True)
+        )
+        shift_wide = (shift_noise[0] * rl**0.5, shift_noise[1] * rr**0.5)
+        models = NoiseModel(scaled(noise, gain), scaled(noise_in, gain), shift_wide)
         # the quantiser's residual is correlated over its blocks and the prefilter: σ_d from
         # its pooled autocorrelation, not as if the 23 × 23 pixels were independent (not after
         # a blur equalisation, whose even misfit the autocorrelation would read as noise)
