@@ -89,7 +89,16 @@ class MatchConfig:
         1.2–1.4×), while in the input's units it reads ≤ 1 and nothing changes; a phone
         pair's ISP misfit raises it either way (phone_wide_ultra: ≥ 100 matches on 15 of 16
         pairs, 0–22 per pair when the floor was skipped after equalisation; the sharpened
-        motorcycle keeps 511 of 565 instead of 397).
+        motorcycle keeps 511 of 565 instead of 397). The clean motorcycle pair reads 14 (a
+        misfit that grows with the windows' contrast: its surfaces, and the image–GT offset,
+        not an ISP), so its floor is 2.3 and it keeps 605 matches at 0.0727 px instead of 457
+        at 0.0642 (418 at 0.063 before the floor): the 456 windows that a floor of 1 keeps
+        still read 0.0642 px, the 149 it adds 0.0987 (their σ_d 0.035 against 0.026 px says
+        so). ``typical_misfit`` = 14 gives those figures back but the degraded pairs lose
+        their matches (Adirondack JPEG q95 / q85 / q70 68 / 53 / 53 %, denoised 30 %; Piano
+        q85 51 %), as does a floor from the intercept of the residual's regression on the
+        window contrast (motorcycle q85 / q70 51 / 54 %: JPEG's error grows with contrast
+        too).
     typical_normalized : float
         The same for the normalised residual s² / window variance: clean 0.014 (Adirondack),
         0.029 (motorcycle); JPEG q85 0.073, q70 0.10. The normalised test's bound is raised by
