@@ -91,7 +91,13 @@ class CirclePair:
         object.__setattr__(self, "square_ids", s)
 
 
-def _check_board(squares: tuple[int, int], square_m: float, margin_m: float) -> tuple[int, int]:
+def _check_board(
+    board: Chessboard | VerificationChart, squares: tuple[int, int]
+) -> tuple[int, int]:
+    """Check a board's ``squares`` (cols, rows) and lengths, and store its ``square_m`` and
+    ``margin_m`` as floats and its ``black``, ``white`` as checked reflectances (frozen
+    dataclasses' ``__post_init__``); (cols, rows)."""
+    square_m, margin_m = board.square_m, board.margin_m
     cols, rows = (int(n) for n in squares)
     if (cols, rows) != tuple(squares) or cols < 2 or rows < 2:
         raise InputError(f"squares must be two integers (cols, rows) >= 2, got {squares}")
@@ -99,6 +105,10 @@ def _check_board(squares: tuple[int, int], square_m: float, margin_m: float) -> 
         raise InputError(f"square_m must be a positive length in metres, got {square_m}")
     if not (np.isfinite(margin_m) and margin_m >= 0):
         raise InputError(f"margin_m must be a length >= 0 in metres, got {margin_m}")
+    object.__setattr__(board, "square_m", float(square_m))
+    object.__setattr__(board, "margin_m", float(margin_m))
+    object.__setattr__(board, "black", require_reflectance(board.black, "black"))
+    object.__setattr__(board, "white", require_reflectance(board.white, "white"))
     return cols, rows
 
 
@@ -228,14 +238,8 @@ class Chessboard:
     _codes: NDArray[np.int8] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        cols, rows = _check_board(
-            (self.pattern[0] + 1, self.pattern[1] + 1), self.square_m, self.margin_m
-        )
+        cols, rows = _check_board(self, (self.pattern[0] + 1, self.pattern[1] + 1))
         object.__setattr__(self, "pattern", (cols - 1, rows - 1))
-        object.__setattr__(self, "square_m", float(self.square_m))
-        object.__setattr__(self, "margin_m", float(self.margin_m))
-        object.__setattr__(self, "black", require_reflectance(self.black, "black"))
-        object.__setattr__(self, "white", require_reflectance(self.white, "white"))
         object.__setattr__(self, "_codes", _board_codes((cols, rows), None))
 
     @property
@@ -306,17 +310,13 @@ class VerificationChart:
     _pairs: tuple[CirclePair, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        cols, rows = _check_board(self.squares, self.square_m, self.margin_m)
+        cols, rows = _check_board(self, self.squares)
         if cols < 10 or rows < 8:
             raise InputError(
                 f"a verification chart needs at least 10 × 8 squares (cols, rows) for its "
                 f"circle pairs, got {cols} × {rows}; use Chessboard for small boards"
             )
         object.__setattr__(self, "squares", (cols, rows))
-        object.__setattr__(self, "square_m", float(self.square_m))
-        object.__setattr__(self, "margin_m", float(self.margin_m))
-        object.__setattr__(self, "black", require_reflectance(self.black, "black"))
-        object.__setattr__(self, "white", require_reflectance(self.white, "white"))
         r0, c0 = rows // 2, cols // 2
         if (r0 + c0) % 2:  # keep the centre square black so the polarities hold
             c0 -= 1

@@ -151,7 +151,8 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
         ),
         "equalise_blur": (
             "bool",
-            "Blur the sharper image of the window to the other's before the coarse step.",
+            "After the coarse step, blur the sharper image to the other's blur (chosen on tiles "
+            "aligned at the coarse disparity and row offset) before the sub-pixel fit.",
             "On: wide and tele differ in blur.",
         ),
         "coarse_rows": (

@@ -326,7 +326,7 @@ def measure_roi(
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
-        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0)
+        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0)
         if s_l > 0 or s_r > 0:
             variants.insert(0, (bl, br, s_l - s_r))
     found: tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]] | None = None

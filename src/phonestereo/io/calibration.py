@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from phonestereo.errors import InputError, ShapeError
 from phonestereo.geometry import Camera, Rig, Transform, lens_from_dict
+from phonestereo.io.json_text import read_json
 
 FORMAT_NAME = "phonestereo-calibration"
 SCHEMA_VERSION = 1
@@ -343,15 +344,7 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
             f"calibration file '{p}' not found; give the path of a calibration.json (or import "
             "an OpenCV YAML with import_opencv_yaml)"
         )
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"{p.name}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        ) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read calibration file '{p}': {exc}") from exc
-    return calibration_from_dict(data, p.name)
+    return calibration_from_dict(read_json(p, "calibration file"), p.name)
 
 
 __all__ = [

@@ -39,6 +39,7 @@ import pydantic
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from phonestereo.errors import InputError
+from phonestereo.io.json_text import parse_json
 from phonestereo.io.manifest_fields import (
     ORIENTATION_BUCKETS,
     normalise_orientation,
@@ -281,12 +282,7 @@ def parse_manifest(text: str, source: str = MANIFEST_NAME) -> Manifest:
     source : str
         Name used at the start of every error message.
     """
-    try:
-        raw = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"{source}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        ) from exc
+    raw = parse_json(text, source)
     if not isinstance(raw, dict):
         raise InputError(f"{source}: must be a JSON object with a 'captures' list")
     try:

@@ -28,7 +28,7 @@ from phonestereo.errors import InputError
 from phonestereo.io import Calibration, Manifest
 from phonestereo.io.importers.android_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import STANDARD_GRAVITY, image_to_platform_K
-from phonestereo.sim.export_common import write_dump
+from phonestereo.sim.export_common import capture_doc, write_dump
 
 R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 FIRST_FRAME_NS = 5_000_000_000
@@ -105,19 +105,8 @@ def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], 
                 w, h = cal.rig.tele.size
                 res["android.scaler.cropRegion"] = [ox, oy, ox + 2 * w, oy + 2 * h]
             cams[cid] = res
-        doc = {
-            "format": FORMAT_CAPTURE,
-            "version": 1,
-            "id": c.id,
-            "kind": c.kind,
-            "accelerometer": [float(v) for v in acc],
-            "focus_group": c.focus_group,
-            "focus_attempt": c.focus_attempt,
-            "temperature_c": c.temperature_c,
-            "roi": list(c.roi) if c.roi is not None else None,
-            "cameras": cams,
-        }
-        captures[f"{c.id}.json"] = {k: v for k, v in doc.items() if v is not None}
+        motion = {"accelerometer": [float(v) for v in acc]}
+        captures[f"{c.id}.json"] = capture_doc(FORMAT_CAPTURE, c, motion, cams)
     return session, captures
 
 

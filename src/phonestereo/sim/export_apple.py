@@ -32,7 +32,7 @@ from phonestereo.io.importers.apple import R_BACK
 from phonestereo.io.importers.apple_lut import apple_distort, image_grid, r_max
 from phonestereo.io.importers.apple_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import image_to_platform_K
-from phonestereo.sim.export_common import write_dump
+from phonestereo.sim.export_common import capture_doc, write_dump
 
 LUT_SIZE = 42
 FIRST_FRAME_S = 5.0
@@ -128,7 +128,7 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
         cams = {}
         for role in ("wide", "tele"):
             shot: dict[str, Any] = {
-                "image": f"images/{c.id}_{IDS[role]}{Path(c.wide).suffix}",
+                "image": f"images/{c.id}_{IDS[role]}{Path(getattr(c, role)).suffix}",
                 "timestamp_s": FIRST_FRAME_S + c.time_s,
                 "focusMode": 0 if c.focus_mode == "manual" else 2,
             }
@@ -136,13 +136,8 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
                 lp = c.focus_position * LENS_POSITION_PER_DIOPTRE
                 shot["lensPosition"] = min(1.0, max(0.0, lp))
             cams[IDS[role]] = shot
-        doc = {
-            "format": FORMAT_CAPTURE, "version": 1, "id": c.id, "kind": c.kind,
-            "gravity": [float(v) for v in g], "focus_group": c.focus_group,
-            "focus_attempt": c.focus_attempt, "temperature_c": c.temperature_c,
-            "roi": list(c.roi) if c.roi is not None else None, "cameras": cams,
-        }
-        captures[f"{c.id}.json"] = {k: v for k, v in doc.items() if v is not None}
+        motion = {"gravity": [float(v) for v in g]}
+        captures[f"{c.id}.json"] = capture_doc(FORMAT_CAPTURE, c, motion, cams)
     return session, captures
 
 

@@ -1,4 +1,5 @@
-"""What the Android and Apple exporters share: writing a dump folder from its documents."""
+"""What the Android and Apple exporters share: a capture file's labels, and writing a dump
+folder from its documents."""
 
 from __future__ import annotations
 
@@ -8,7 +9,29 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from phonestereo.io import Manifest
+from phonestereo.io import CaptureEntry, Manifest
+
+
+def capture_doc(
+    fmt: str, c: CaptureEntry, motion: dict[str, list[float]], cams: dict[str, Any]
+) -> dict[str, Any]:
+    """A capture file's JSON: ``format`` ``fmt`` version 1, the capture's id and kind, the
+    platform's motion vector (``motion``: its one key named as the platform names it), focus
+    group and attempt, temperature and ROI, and the per-camera results ``cams``; labels the
+    capture does not have are left out."""
+    doc = {
+        "format": fmt,
+        "version": 1,
+        "id": c.id,
+        "kind": c.kind,
+        **motion,
+        "focus_group": c.focus_group,
+        "focus_attempt": c.focus_attempt,
+        "temperature_c": c.temperature_c,
+        "roi": list(c.roi) if c.roi is not None else None,
+        "cameras": cams,
+    }
+    return {k: v for k, v in doc.items() if v is not None}
 
 
 def write_dump(

@@ -181,3 +181,28 @@ def test_round_trip_of_a_lens_apple_can_carry_is_exact(sim_set: Path, tmp_path: 
         # px wide, 3e-6 px tele: what is left is the 42-entry table's linear interpolation)
         assert _lens_map_px(a, b) <= 0.01, role
         assert result.lens_fit_px[role] <= 0.05, role
+
+
+def test_each_camera_keeps_its_own_image_format(sim_set: Path, tmp_path: Path) -> None:
+    """A set whose tele images are in another format than its wide images exports each under
+    its own extension (the exporter named both after the wide's, so the tele file was
+    missing)."""
+    import cv2
+
+    src = tmp_path / "src"
+    shutil.copytree(sim_set, src)
+    doc = json.loads((src / "manifest.json").read_text())
+    for c in doc["captures"]:
+        old = src / c["tele"]
+        new = old.with_suffix(".png" if old.suffix == ".jpg" else ".jpg")
+        assert cv2.imwrite(str(new), cv2.imread(str(old)))  # 8-bit: JPEG holds no 16-bit
+        old.unlink()
+        c["tele"] = str(Path(c["tele"]).with_suffix(new.suffix))
+    (src / "manifest.json").write_text(json.dumps(doc))
+    cs = load_capture_set(src)
+    write_apple_dump(tmp_path / "apple", load_calibration(src / "calibration.json"),
+                     cs.manifest, src)
+    import_apple(tmp_path / "apple", tmp_path / "set")
+    got = load_capture_set(tmp_path / "set")  # checks that every image it names exists
+    for a, b in zip(cs.captures(), got.captures(), strict=True):
+        assert Path(b.tele).suffix == Path(a.tele).suffix != Path(b.wide).suffix

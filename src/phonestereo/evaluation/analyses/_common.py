@@ -4,6 +4,7 @@ kind, writing the JSON table, figure saving, JSON cleaning, per-corner maps."""
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -16,6 +17,7 @@ from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.geometry import Rig
 from phonestereo.io import CaptureEntry, CaptureSet, load_calibration, load_capture_set
+from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
 T = TypeVar("T")
@@ -37,6 +39,19 @@ def map_panel(fig: Figure, ax: Any, xy: F64, v: F64, title: str, label: str, **k
     ax.set_ylabel("rectified y [px]")
     ax.invert_yaxis()
     ax.set_aspect("equal")
+
+
+def label_axes(
+    ax: Any, title: str, xlabel: str, ylabel: str, *, legend_fontsize: float | None = None
+) -> None:
+    """The analyses' plot style: ``title``, the axis labels, a light grid, and a legend in
+    ``legend_fontsize`` points when one is given."""
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    if legend_fontsize is not None:
+        ax.legend(fontsize=legend_fontsize)
 
 
 def json_clean(v: Any) -> Any:
@@ -62,6 +77,23 @@ def open_set(capture_set: str | Path | CaptureSet) -> tuple[CaptureSet, Rig]:
     """The capture set (loaded and validated when a path is given) and its calibration's rig."""
     cs = capture_set if isinstance(capture_set, CaptureSet) else load_capture_set(capture_set)
     return cs, load_calibration(cs.calibration_path()).rig
+
+
+def open_canonical(
+    capture_set: str | Path | CaptureSet,
+) -> tuple[float, CaptureSet, Rig, Rectification]:
+    """Every canonical-mode analysis's prologue: the clock at the start (``time.perf_counter``,
+    for :func:`seconds_since`), the set and its rig (:func:`open_set`), and the rig's
+    ``canonical`` rectification."""
+    t0 = time.perf_counter()
+    cs, rig = open_set(capture_set)
+    return t0, cs, rig, Rectification.from_rig(rig, "canonical")
+
+
+def seconds_since(t0: float) -> float:
+    """Wall time since ``t0`` (``time.perf_counter``), seconds rounded to 0.01: a table's
+    ``seconds``."""
+    return round(time.perf_counter() - t0, 2)
 
 
 def captures_of_kind(cs: CaptureSet, kind: str, analysis: str, needs: str) -> list[CaptureEntry]:
@@ -125,10 +157,13 @@ def run_table(
 __all__ = [
     "captures_of_kind",
     "json_clean",
+    "label_axes",
     "map_panel",
     "measure_each",
+    "open_canonical",
     "open_set",
     "run_table",
     "save_figure",
+    "seconds_since",
     "write_output",
 ]

@@ -38,8 +38,10 @@ from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
     captures_of_kind,
+    label_axes,
     measure_each,
     open_set,
+    seconds_since,
     write_output,
 )
 from phonestereo.evaluation.analyses._common import save_figure as _save
@@ -168,7 +170,7 @@ def analyze_distortion(
         table["lens_models"] = calib
     if truth is not None:
         table["truth"] = truth
-    table["seconds"] = round(time.perf_counter() - t0, 2)
+    table["seconds"] = seconds_since(t0)
     data = {"q": q_all, "e": e_all, "e_fixed": e_fixed, "fix": pooled, "fixes": per_fix,
             "labels": [f"{r['id']} ({r['focus_group']})" for r in rows],
             "lens_fits": fits}
@@ -266,10 +268,9 @@ def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) ->
     for f, label in zip(data["fixes"], data["labels"], strict=True):
         rr = np.linspace(0.0, f.radius_scale_px, 100)
         ax.plot(rr, f.radial(rr), lw=1.2, label=f"{label}: o = {f.offset_px:+.3f} px")
-    ax.set_title("Residual radial distortion P(r) per capture (Figs. 3-5, 3-6)")
-    ax.set_xlabel("radius from the distortion centre [rectified px]")
-    ax.set_ylabel("residual radial displacement P(r) [px]")
-    ax.grid(alpha=0.3)
+    label_axes(ax, "Residual radial distortion P(r) per capture (Figs. 3-5, 3-6)",
+               "radius from the distortion centre [rectified px]",
+               "residual radial displacement P(r) [px]")
     ax.legend(fontsize=7, ncol=2)
     files.append(_save(fig, out_dir / "distortion_per_capture.png"))
     if data.get("lens_fits"):

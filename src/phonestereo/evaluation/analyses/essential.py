@@ -31,7 +31,6 @@ ranges per method), ``essential_pose.png`` (Figure 3-25) and ``essential_scales.
 from __future__ import annotations
 
 import math
-import time
 from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
@@ -43,7 +42,12 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, run_table
+from phonestereo.evaluation.analyses._common import (
+    label_axes,
+    open_canonical,
+    run_table,
+    seconds_since,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import measure_capture
 from phonestereo.fixes.essential_compare import (
@@ -159,9 +163,7 @@ def analyze_essential(
     InputError
         An invalid set, or one without a refocus stack of verification captures.
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
-    rect = Rectification.from_rig(rig, "canonical")
+    t0, cs, rig, rect = open_canonical(capture_set)
     stacks, rows = measure_stacks(cs, rect, "essential", progress)
     base = {"analysis": "essential", "capture_set": str(cs.root), "captures": rows}
     groups: dict[str, Any] = {}
@@ -195,7 +197,7 @@ def analyze_essential(
     if not done:
         why = "; ".join(f"{k}: {v['reason']}" for k, v in groups.items())[:600]
         return {**base, "ok": False, "reason": f"no refocus stack could be compared: {why}",
-                "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}
+                "groups": groups, "seconds": seconds_since(t0)}
     med: dict[str, list[float]] = defaultdict(list)
     for v in done.values():
         for m in v["methods"]:
@@ -205,7 +207,7 @@ def analyze_essential(
                                          else math.inf))
     out = {**base, "ok": True, "reason": "", "groups": groups, "ranking": overall,
            "best": overall[0], "_fig": figs.get("cmp"),
-           "seconds": round(time.perf_counter() - t0, 2)}
+           "seconds": seconds_since(t0)}
     return out
 
 
@@ -248,10 +250,7 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
             ax.plot(k, fixed, "s--", label="after optimal fix")
             ax.axhline(pose["calibration"][key][j], color="k", lw=0.8, label="calibration")
             name = ("om", "t̂")[row_i] + "_" + "xyz"[j]
-            ax.set_title(f"{name} from E per attempt")
-            ax.set_xlabel("attempt")
-            ax.set_ylabel(f"{name} {unit}".strip())
-            ax.grid(alpha=0.3)
+            label_axes(ax, f"{name} from E per attempt", "attempt", f"{name} {unit}".strip())
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("Rotation and translation decomposed from E (thesis Fig. 3-25)")
     files.append(_save(fig, out_dir / "essential_pose.png"))
@@ -268,12 +267,10 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
             for r in show:
                 s = [(a.s_wide, a.s_tele)[c] if a.ok else np.nan for a in r.per_attempt]
                 ax.plot(k, s, ".-", lw=0.8, label=r.label)
-            ax.set_title(f"{('wide', 'tele')[c]} focal scale per attempt")
-            ax.set_xlabel("attempt")
-            ax.set_ylabel("f / f_reference")
+            label_axes(ax, f"{('wide', 'tele')[c]} focal scale per attempt", "attempt",
+                       "f / f_reference")
             lo, hi = np.nanmin(true[:, c]), np.nanmax(true[:, c])
             ax.set_ylim(min(lo, 1.0) - 0.01, max(hi, 1.0) + 0.01)
-            ax.grid(alpha=0.3)
         axes[1].legend(fontsize=7)
         files.append(_save(fig, out_dir / "essential_scales.png"))
     return files

@@ -20,7 +20,6 @@ relative errors before / after, per stack).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import open_set, run_table
+from phonestereo.evaluation.analyses._common import (
+    open_canonical,
+    run_table,
+    seconds_since,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.analyses.essential import MIN_ATTEMPTS, measure_stacks
 from phonestereo.fixes.essential_compare import MIN_POINTS, shared_points
@@ -96,9 +99,7 @@ def analyze_handheld(
     InputError
         An invalid set, or one without a refocus stack of verification captures.
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
-    rect = Rectification.from_rig(rig, "canonical")
+    t0, cs, rig, rect = open_canonical(capture_set)
     stacks, rows = measure_stacks(cs, rect, "handheld", progress)
     groups: dict[str, Any] = {}
     for g, atts in stacks.items():
@@ -124,7 +125,7 @@ def analyze_handheld(
         groups[g] = entry
     done = {k: v for k, v in groups.items() if v["ok"]}
     base = {"analysis": "handheld", "capture_set": str(cs.root), "captures": rows,
-            "groups": groups, "seconds": round(time.perf_counter() - t0, 2)}
+            "groups": groups, "seconds": seconds_since(t0)}
     if not done:
         why = "; ".join(f"{k}: {v['reason']}" for k, v in groups.items())[:600]
         return {**base, "ok": False, "reason": f"no refocus stack could be measured: {why}"}

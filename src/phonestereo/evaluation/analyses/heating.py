@@ -19,7 +19,6 @@ when the module reports temperature, ``heating_temperature.png`` (d vs temperatu
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,13 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import measure_each, open_set, write_output
+from phonestereo.evaluation.analyses._common import (
+    label_axes,
+    measure_each,
+    open_canonical,
+    seconds_since,
+    write_output,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -144,10 +149,8 @@ def analyze_heating(
     InputError
         An invalid set, or one lacking the captures the analysis needs (message names them).
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
+    t0, cs, _, rect = open_canonical(capture_set)
     caps = _check_needs(cs)
-    rect = Rectification.from_rig(rig, "canonical")
     n_min = MIN_SAMPLES
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect, min_corners=n_min), progress)
     found = [m for m in ms if m.found]
@@ -201,7 +204,7 @@ def analyze_heating(
         truth["d_mean_px"] = [round(v, 5) for v in truth["d_mean_px"]]
         out["truth"] = truth
     out["_per_corner_d_px"] = per_corner  # for the figures; dropped from the JSON
-    out["seconds"] = round(time.perf_counter() - t0, 2)
+    out["seconds"] = seconds_since(t0)
     return out
 
 
@@ -263,12 +266,10 @@ def write_figures(table: dict[str, Any], out_dir: Path) -> list[Path]:
         first = np.argmax(np.isfinite(pc[:, 0]))
         for j in pick:
             ax.plot(t, pc[:, j] - pc[first, j], ".-", lw=0.8, ms=3)
-        ax.set_title(
-            f"Disparity change of {len(pick)} chart corners vs time (each colour one corner)"
+        label_axes(
+            ax, f"Disparity change of {len(pick)} chart corners vs time (each colour one corner)",
+            "time since camera start [s]", "d − d(first capture) [px]",
         )
-        ax.set_xlabel("time since camera start [s]")
-        ax.set_ylabel("d − d(first capture) [px]")
-        ax.grid(alpha=0.3)
         files.append(_save(fig, out_dir / "heating_corners.png"))
     temps = np.array(
         [np.nan if r["temperature_c"] is None else r["temperature_c"] for r in table["captures"]]
@@ -284,10 +285,8 @@ def write_figures(table: dict[str, Any], out_dir: Path) -> list[Path]:
                 tt, np.polyval(corr["coefficients"], tt), "-", color="tab:red", label="linear fit"
             )
             ax.legend()
-        ax.set_title("Heating: disparity vs module temperature (thesis Fig. 3-3)")
-        ax.set_xlabel("module temperature [°C]")
-        ax.set_ylabel("mean disparity d [px]")
-        ax.grid(alpha=0.3)
+        label_axes(ax, "Heating: disparity vs module temperature (thesis Fig. 3-3)",
+                   "module temperature [°C]", "mean disparity d [px]")
         files.append(_save(fig, out_dir / "heating_temperature.png"))
     return files
 

@@ -24,7 +24,6 @@ disparity of every capture coloured by bucket, and the per-bucket offsets) and
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -34,7 +33,13 @@ from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import measure_each, open_set, run_table
+from phonestereo.evaluation.analyses._common import (
+    label_axes,
+    measure_each,
+    open_canonical,
+    run_table,
+    seconds_since,
+)
 from phonestereo.evaluation.analyses._common import save_figure as _save
 from phonestereo.evaluation.chart_ruler import (
     CaptureMeasurement,
@@ -114,10 +119,8 @@ def analyze_orientation(
     InputError
         An invalid set, or one without verification captures in two orientations.
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
+    t0, cs, _, rect = open_canonical(capture_set)
     caps, buckets = _check_needs(cs)
-    rect = Rectification.from_rig(rig, "canonical")
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     base = {"analysis": "orientation", "capture_set": str(cs.root), "captures_total": len(ms)}
     keep = [i for i, m in enumerate(ms) if m.found]
@@ -167,7 +170,7 @@ def analyze_orientation(
     out["_table"] = table
     out["_q_wide"] = [m.q_wide[np.isin(corner_keys(m.ids), keys)] for m in ms_ok]
     out["_buckets"] = bk_ok
-    out["seconds"] = round(time.perf_counter() - t0, 2)
+    out["seconds"] = seconds_since(t0)
     return out
 
 
@@ -188,11 +191,9 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
     for row, b in zip(table, bks, strict=True):
         a1.plot(idx, row, ".-", lw=0.6, ms=2, color=colour[b], label=None if b in seen else b)
         seen.add(b)
-    a1.set_title("Disparity of every chart corner per capture, by orientation (thesis Fig. 3-11)")
-    a1.set_xlabel("chart corner (row-major order of the corners seen in every capture)")
-    a1.set_ylabel("disparity d [px]")
-    a1.grid(alpha=0.3)
-    a1.legend(fontsize=8)
+    label_axes(a1, "Disparity of every chart corner per capture, by orientation (thesis Fig. 3-11)",
+               "chart corner (row-major order of the corners seen in every capture)",
+               "disparity d [px]", legend_fontsize=8)
     rel = tb["offsets_relative"]
     x = np.arange(len(names))
     vals = [rel[b]["offset_px"] for b in names]

@@ -21,7 +21,6 @@ the fitted per-attempt scales are compared with the true focal-length ratios. Ou
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -32,17 +31,18 @@ from matplotlib.figure import Figure
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
 from phonestereo.evaluation.analyses._common import (
+    label_axes,
     map_panel,
     measure_each,
-    open_set,
+    open_canonical,
     run_table,
     save_figure,
+    seconds_since,
 )
 from phonestereo.evaluation.chart_ruler import corner_keys, measure_capture, shared_keys
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.fixes.refocus import averaging_trials, detect_focus_failures, sharpness
 from phonestereo.io import CaptureEntry, CaptureSet, read_gray
-from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
 AVERAGE_N = (1, 3, 5)  # attempts averaged (Table 3 rows)
@@ -124,10 +124,8 @@ def analyze_repeatability(
     InputError
         An invalid set, or one without a refocus stack of verification captures.
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
+    t0, cs, rig, rect = open_canonical(capture_set)
     caps = stack_entries(cs, "repeatability", "one static verification chart")
-    rect = Rectification.from_rig(rig, "canonical")
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     focus = focus_check(cs, caps)
     rows = [
@@ -199,7 +197,7 @@ def analyze_repeatability(
         out["truth"] = {"scale_ratio": truth, "scale_error_max": err}
     out["_xy"] = np.nanmean(rect.points_wide(Qw), axis=0)
     out["_before"], out["_after"], out["_avg"] = D0, D1, avg
-    out["seconds"] = round(time.perf_counter() - t0, 2)
+    out["seconds"] = seconds_since(t0)
     return out
 
 
@@ -243,11 +241,8 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
         if "truth" in tb:
             ax.plot(range(len(s)), tb["truth"]["scale_ratio"][role], "x", ms=9,
                     label=f"{role}: true focal ratio")
-    ax.set_title("Same-camera scale of each refocus attempt against the first")
-    ax.set_xlabel("focus attempt (usable, in order)")
-    ax.set_ylabel("scale s [-]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    label_axes(ax, "Same-camera scale of each refocus attempt against the first",
+               "focus attempt (usable, in order)", "scale s [-]", legend_fontsize=8)
     files.append(save_figure(fig, out_dir / "repeatability_scales.png"))
     return files
 

@@ -36,6 +36,7 @@ from phonestereo.evaluation.analyses._common import (
     captures_of_kind,
     measure_each,
     open_set,
+    seconds_since,
     write_output,
 )
 from phonestereo.evaluation.analyses._common import save_figure as _save
@@ -179,7 +180,7 @@ def analyze_translation(
     truth = _truth(cs.root, good, rects)
     if truth is not None:
         table["truth"] = truth
-    table["seconds"] = round(time.perf_counter() - t0, 2)
+    table["seconds"] = seconds_since(t0)
     return table, {"pooled": pooled, "rects": rects}
 
 

@@ -20,7 +20,6 @@ scales, compared per attempt. Outputs: ``wt_scale.json``, ``wt_scale_corner_rang
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,13 @@ from matplotlib.figure import Figure
 from scipy.spatial import cKDTree
 
 from phonestereo.evaluation.analyses import AnalysisOutput
-from phonestereo.evaluation.analyses._common import measure_each, open_set, run_table
+from phonestereo.evaluation.analyses._common import (
+    label_axes,
+    measure_each,
+    open_canonical,
+    run_table,
+    seconds_since,
+)
 from phonestereo.evaluation.analyses.repeatability import (
     Progress,
     focus_check,
@@ -226,10 +231,8 @@ def analyze_wt_scale(
     InputError
         An invalid set, or one without a refocus stack of verification captures.
     """
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
+    t0, cs, _, rect = open_canonical(capture_set)
     caps = stack_entries(cs, "wt-scale", "one or two static verification charts")
-    rect = Rectification.from_rig(rig, "canonical")
     c = np.asarray(rect.tele_rect.K[:2, 2], dtype=np.float64)
     rows = measure_each(
         caps,
@@ -253,7 +256,7 @@ def analyze_wt_scale(
         return {**base, "ok": False, "captures": rows, "reason": why}
     return {**base, "ok": True, "reason": "", "captures_used": len(used), "charts": n_charts,
             "stack": stack, "captures": rows,
-            "seconds": round(time.perf_counter() - t0, 2)}
+            "seconds": seconds_since(t0)}
 
 
 # --- figures -----------------------------------------------------------------------------------
@@ -301,12 +304,9 @@ def write_figures(tb: dict[str, Any], out_dir: Path) -> list[Path]:
                     label=f"{name} truth")
     if tb["charts"] > 1:
         ax.plot(att, [r["global_fit"]["scale"] for r in used], "s--", label="all points")
-    ax.set_title("W-T scale per refocus attempt (tele about its rectified principal point)")
-    ax.set_xlabel("focus attempt")
+    label_axes(ax, "W-T scale per refocus attempt (tele about its rectified principal point)",
+               "focus attempt", "W-T scale s [-]", legend_fontsize=8)
     ax.set_xticks(att)
-    ax.set_ylabel("W-T scale s [-]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
     files.append(save_figure(fig, out_dir / "wt_scale_scales.png"))
     return files
 

@@ -39,6 +39,7 @@ from phonestereo.geometry.transform import (
     nearest_rotation,
     orthonormality_error,
 )
+from phonestereo.io import json_text
 from phonestereo.io.calibration import Calibration, save_calibration
 from phonestereo.io.manifest import CaptureEntry, Manifest, write_manifest
 
@@ -291,15 +292,6 @@ def capture_gravity(
 
 def read_json(path: Path, what: str) -> Any:
     """A JSON document (NaN/Infinity tokens are parsed and then refused by the schemas)."""
-    import json
-
     if not path.is_file():
         raise InputError(f"{what} '{path}' not found; check the DUMP folder")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"{path.name}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
-        ) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read {what} '{path}': {exc}") from exc
+    return json_text.read_json(path, what)

@@ -1,0 +1,43 @@
+"""Reading a user's JSON file: one wording for every parse error (file name, line, column,
+what is wrong) and for a file that cannot be read."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from phonestereo.errors import InputError
+
+
+def parse_json(text: str, source: str) -> Any:
+    """The JSON document ``text``; :class:`InputError` ``"<source>: not valid JSON at line L
+    column C: …"`` when it does not parse.
+
+    >>> parse_json('{"a": [1, 2]}', "x.json")
+    {'a': [1, 2]}
+    >>> parse_json('{"a": }', "x.json")
+    Traceback (most recent call last):
+    ...
+    phonestereo.errors.InputError: x.json: not valid JSON at line 1 column 7: Expecting value
+    """
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"{source}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}"
+        ) from exc
+
+
+def read_json(path: Path, what: str) -> Any:
+    """The JSON document in file ``path`` (UTF-8); :class:`InputError` ``"cannot read <what>
+    '<path>': …"`` when it cannot be read, :func:`parse_json`'s (named by the file name) when
+    it does not parse."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {what} '{path}': {exc}") from exc
+    return parse_json(text, path.name)
+
+
+__all__ = ["parse_json", "read_json"]
