@@ -50,6 +50,7 @@ from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.flows import application
 from phonestereo.flows import learning as learning_flow
 from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.face_backends import PairBackend
 from phonestereo.flows.learning import (
     CachedBackend,
     default_backend,
@@ -70,11 +71,12 @@ BLOCKS = (
     ("  window Rectification.from_rig", "rectification/rectify.py", "from_rig"),
     ("  window remap (maps + cv2.remap)", "rectification/rectify.py", "remap"),
     ("    build_map (rectification maps)", "rectification/maps.py", "build_map"),
-    ("  coarse_disparity", "flows/roi_disparity.py", "coarse_disparity"),
-    ("  equalise_blur", "flows/roi_disparity.py", "equalise_blur"),
+    ("  coarse_disparity", "flows/coarse.py", "coarse_disparity"),
+    ("  equalise_blur", "flows/coarse.py", "equalise_blur"),
     ("  match_rectified", "features/matching.py", "match_rectified"),
     ("  fit_wt_scale", "fixes/wt_scale.py", "fit_wt_scale"),
     ("  fit_plane", "flows/roi_disparity.py", "fit_plane"),
+    ("  refine_lk", "features/subpixel.py", "refine_lk"),
     ("reference_rectification", "flows/roi_disparity.py", "reference_rectification"),
     ("Corrector.correct", "flows/config.py", "correct"),
     ("capture_gates", "flows/gates.py", "capture_gates"),
@@ -89,11 +91,23 @@ LEARN_BLOCKS = (
     ("  match_rectified (both blocks)", "features/matching.py", "match_rectified"),
     ("Rectification.from_rig (all)", "rectification/rectify.py", "from_rig"),
     ("cv2.remap / maps (all)", "rectification/rectify.py", "remap"),
+    ("refine_lk (all)", "features/subpixel.py", "refine_lk"),
+    ("landmark_disparity._prepare (reference remap, splines)",
+     "learning/landmark_disparity.py", "_prepare"),
 )
 #: Variants of the landmark step (same face images): label → (backend factory, guided by the
 #: tele). The first is the learning flow's; the others are the obvious alternatives.
+def _full_tile_backend() -> LandmarkBackend:
+    """The flow's backend with its wide detector on full-resolution tiles (before #18)."""
+    return PairBackend(
+        MediaPipeBackend(mirror_average=False, two_level_tiles=(0.35, 0.08)),
+        MediaPipeBackend(min_tile_px=1000, mirror_average=False),
+    )
+
+
 LANDMARK_VARIANTS: tuple[tuple[str, Any, bool], ...] = (
     ("flow default: wide two-level tiles, tele guided by it", default_backend, True),
+    ("the same, the detector on full-resolution tiles", _full_tile_backend, True),
     ("the same, tele searched (tiles of 1000 px)", default_backend, False),
     ("MediaPipeBackend() on both, unguided", MediaPipeBackend, False),
 )
@@ -472,13 +486,14 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
     with _MemoryReads(cs, images):
         for e in entries:
             tb = TimedBackend(mp)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             r = learn(e, tb)
-            total = time.perf_counter() - t0
+            total, cpu = time.perf_counter() - t0, time.process_time() - c0
             obs += list(r.observations)
             rows.append({
                 "capture_id": e.id, "ok": r.ok, "gate": r.gate, "n_obs": len(r.observations),
-                "total_ms": round(1000 * total, 1), "landmarks_ms": round(1000 * tb.seconds, 1),
+                "total_ms": round(1000 * total, 1), "cpu_ms": round(1000 * cpu, 1),
+                "landmarks_ms": round(1000 * tb.seconds, 1),
                 "rest_ms": round(1000 * (total - tb.seconds), 1),
             })
         # The rest, profiled, with the landmarks served from a cache (filled first).
@@ -495,6 +510,7 @@ def bench_learning(cs: CaptureSet, cal: Any) -> tuple[dict[str, Any], list[Any]]
         "captures": rows,
         "landmark_variants": landmark_variants(images, cal),
         "median_total_ms": round(float(np.median([r["total_ms"] for r in rows])), 1),
+        "median_cpu_ms": round(float(np.median([r["cpu_ms"] for r in rows])), 1),
         "median_landmarks_ms": round(float(np.median([r["landmarks_ms"] for r in rows])), 1),
         "median_rest_ms": round(float(np.median([r["rest_ms"] for r in rows])), 1),
         "median_rest_cached_landmarks_ms": round(1000 * float(np.median(rest_cached)), 1),
@@ -510,23 +526,32 @@ def landmark_variants(
     images: dict[str, tuple[np.ndarray, np.ndarray]], cal: Any
 ) -> list[dict[str, Any]]:
     """``detect_pair(wide, tele[, guide])`` per face capture under each of
-    :data:`LANDMARK_VARIANTS`: median ms and the faces found (wide + tele, summed)."""
+    :data:`LANDMARK_VARIANTS`: median ms (wall and process CPU) and the faces found (wide +
+    tele, summed). The variants take turns on each capture after one untimed pass (a shared
+    machine's load drifts; the first image of a new size costs MediaPipe a re-allocation)."""
     guide = WideToTeleGuide(reference_rectification(cal.rig, FlowConfig().mode))
-    blank = np.full((240, 320), 128, np.uint8)
-    out = []
-    for label, factory, guided in LANDMARK_VARIANTS:
+    backends = []
+    first = next(iter(images.values()))
+    for _label, factory, guided in LANDMARK_VARIANTS:
         mp = factory()
-        mp.detect_many([blank, blank])  # model load outside the timing
-        ts, n_wide, n_tele = [], 0, 0
-        for w, t in images.values():
-            t0 = time.perf_counter()
+        mp.detect_pair(*first, guide if guided else None)  # model load and warm-up, untimed
+        backends.append((mp, guided))
+    stats = [{"ms": [], "cpu": [], "wide": 0, "tele": 0} for _ in backends]
+    for w, t in images.values():
+        for (mp, guided), st in zip(backends, stats, strict=True):
+            t0, c0 = time.perf_counter(), time.process_time()
             fw, ft = mp.detect_pair(w, t, guide if guided else None)
-            ts.append(time.perf_counter() - t0)
-            n_wide, n_tele = n_wide + len(fw.faces), n_tele + len(ft.faces)
-        out.append({"variant": label, "median_ms": round(1000 * float(np.median(ts)), 1),
-                    "faces_found": n_wide + n_tele, "wide_faces": n_wide,
-                    "tele_faces": n_tele})
-    return out
+            st["ms"].append(time.perf_counter() - t0)
+            st["cpu"].append(time.process_time() - c0)
+            st["wide"] += len(fw.faces)
+            st["tele"] += len(ft.faces)
+    return [
+        {"variant": label, "median_ms": round(1000 * float(np.median(st["ms"])), 1),
+         "median_cpu_ms": round(1000 * float(np.median(st["cpu"])), 1),
+         "faces_found": st["wide"] + st["tele"], "wide_faces": st["wide"],
+         "tele_faces": st["tele"]}
+        for (label, _f, _g), st in zip(LANDMARK_VARIANTS, stats, strict=True)
+    ]
 
 
 # --- main -----------------------------------------------------------------------------------
@@ -586,14 +611,16 @@ def _print(res: dict[str, Any]) -> None:
               f"median |rel err| {v['median_abs_rel_err']} ({v['n_ok']} ok)")
     print(f"{'learning, median ms/face capture':48s} {lr['median_total_ms']:10.1f} "
           f"{500 if big else 200:8d}")
+    if "median_cpu_ms" in lr:
+        print(f"{'learning, median CPU ms/face capture':48s} {lr['median_cpu_ms']:10.1f}")
     print(f"{'  landmarks (MediaPipe, wide + tele)':48s} {lr['median_landmarks_ms']:10.1f}")
     print(f"{'  the rest':48s} {lr['median_rest_ms']:10.1f}")
     print(f"{'  the rest, landmarks cached (re-run)':48s} "
           f"{lr['median_rest_cached_landmarks_ms']:10.1f}")
     for v in lr["landmark_variants"]:
         label = f"  landmarks only: {v['variant']}, ms"
-        print(f"{label:60s} {v['median_ms']:8.1f}   faces wide {v['wide_faces']}, "
-              f"tele {v['tele_faces']}")
+        print(f"{label:60s} {v['median_ms']:8.1f}   CPU {v.get('median_cpu_ms', '-')}, "
+              f"faces wide {v['wide_faces']}, tele {v['tele_faces']}")
     print("\napplication phase blocks (cProfile, cumulative ms per capture):")
     for b in a["blocks_profiled"]:
         print(f"  {b['block']:44s} {b['ms_per_capture']:8.2f}")

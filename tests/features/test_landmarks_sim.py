@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from phonestereo.errors import InputError
 from phonestereo.features.landmarks import MediaPipeBackend
 from phonestereo.learning.ipd import face_depth, fit_face_plane
 from phonestereo.sim import optics, sensor
@@ -85,3 +86,20 @@ def test_face_chart_depth_median_within_1p5_percent(distance_m: float) -> None:
     # Measured medians +0.14 / -0.06 / -0.12 / -0.15 % at 1 / 1.5 / 2 / 3 m; p90 ≤ 0.65 %.
     assert abs(np.median(plane)) < 0.015
     assert np.percentile(np.abs(plane), 90) < 0.015
+
+
+def test_face_chart_depth_with_the_detector_on_shrunk_tiles() -> None:
+    # The learning flow's wide backend shrinks detector tiles (detector_max_px, for 12 MP
+    # images); 512 here shrinks this 2000-px image's tiles 4× and 2× as 1024 does a 4000-px
+    # image's. The landmarks are still measured at full resolution, so the same bounds hold
+    # as with the unshrunk detector (test above): every visible face found, plane-fit
+    # median within 1.5 %, worst face within 3 %.
+    backend = MediaPipeBackend(detector_max_px=512)
+    near = _errors(_captures((1.0,), ((0.5, 0.0),))[0], backend)
+    far = _errors(_captures((3.0,), ((0.0, 0.0),))[0], backend)
+    for e in (near, far):
+        assert e["n"][0] == e["n"][1]
+        assert abs(np.median(e["plane"])) < 0.015
+        assert np.max(np.abs(e["plane"])) < 0.03
+    with pytest.raises(InputError):
+        MediaPipeBackend(detector_max_px=100)  # below the detector's own input size

@@ -75,3 +75,33 @@ def test_matcher_result_does_not_depend_on_the_threads(monkeypatch: pytest.Monke
     assert len(two) == len(one) > 100
     for name in ("xy", "d", "e", "sigma_d"):
         np.testing.assert_array_equal(getattr(two, name), getattr(one, name))
+
+
+def test_refine_lk_halves_equal_fitting_each_half_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    from phonestereo.features.subpixel import SPLIT_AT, bspline_coefficients, refine_lk
+
+    left, right, _ = _pair(2)
+    rng = np.random.default_rng(3)
+    xy = np.stack([rng.integers(40, 360, 2 * SPLIT_AT), rng.integers(20, 140, 2 * SPLIT_AT)], 1)
+    coef = bspline_coefficients(right)
+    d0, e0 = np.full(len(xy), 9.0), np.zeros(len(xy))
+    whole = refine_lk(left, None, coef, xy, d0, e0)
+    k = len(xy) // 2  # the split refine_lk makes: the same numbers as two separate calls
+    halves = [refine_lk(left, None, coef, xy[s], d0[s], e0[s]) for s in (slice(0, k),
+                                                                          slice(k, None))]
+    monkeypatch.setenv("PHONESTEREO_THREADS", "1")
+    one = refine_lk(left, None, coef, xy, d0, e0)
+    assert whole.converged.sum() > 0.9 * len(xy)
+    assert np.median(whole.d[whole.converged]) == pytest.approx(9.0, abs=0.01)
+    for name in ("d", "e", "zncc", "cov_unit", "iterations"):  # bit for bit
+        np.testing.assert_array_equal(getattr(whole, name), getattr(one, name))
+        np.testing.assert_array_equal(
+            getattr(whole, name), np.concatenate([getattr(h, name) for h in halves])
+        )
+
+
+def test_background_on_the_helper_thread_runs_inline() -> None:
+    # refine_lk may be reached from work already on the helper thread: waiting on its own
+    # queue would hang, so it runs there directly.
+    inner = _threads.background(lambda: _threads.background(np.add, 1, 2).result())
+    assert inner.result(timeout=10) == 3

@@ -11,6 +11,7 @@ Hand-written (a dozen lines over ``concurrent.futures``) because the pool must n
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, TypeVar
@@ -22,6 +23,7 @@ T = TypeVar("T")
 #: Below this many items one thread does it all (the hand-over costs ~50 µs).
 MIN_SPLIT = 48
 
+_PREFIX = "phonestereo-split"
 _pool: ThreadPoolExecutor | None = None
 _pool_pid: int | None = None
 
@@ -37,10 +39,15 @@ def split_enabled() -> bool:
     return cores >= 2
 
 
+def _on_helper() -> bool:
+    """True on the helper thread itself: it must not wait on its own queue (it would hang)."""
+    return threading.current_thread().name.startswith(_PREFIX)
+
+
 def _executor() -> ThreadPoolExecutor:
     global _pool, _pool_pid
     if _pool is None or _pool_pid != os.getpid():  # new process (fork): a fresh thread
-        _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="phonestereo-split")
+        _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=_PREFIX)
         _pool_pid = os.getpid()
     return _pool
 
@@ -51,7 +58,7 @@ def run_split(fn: Callable[[Sequence[T]], None], items: Sequence[T]) -> None:
     ``fn`` must write disjoint outputs for disjoint items (so the result does not depend on
     the split); an exception in either half is raised here.
     """
-    if len(items) < MIN_SPLIT or not split_enabled():
+    if len(items) < MIN_SPLIT or not split_enabled() or _on_helper():
         fn(items)
         return
     half = len(items) // 2
@@ -68,7 +75,7 @@ def background(fn: Callable[..., T], *args: Any) -> Future[T]:
     For independent work on the other image of a pair while this thread does its own; take
     the value with ``.result()`` (which raises what ``fn`` raised).
     """
-    if split_enabled():
+    if split_enabled() and not _on_helper():
         return _executor().submit(fn, *args)
     done: Future[T] = Future()
     try:

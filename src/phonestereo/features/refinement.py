@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,3 +61,14 @@ class Refinement:
     template_std: F64
     influence: F32 | None = None
     residual: F32 | None = None
+
+    @classmethod
+    def concat(cls, parts: list[Refinement]) -> Refinement:
+        """The windows of ``parts`` one after the other (influence/residual kept when every
+        part has them)."""
+        names = [f.name for f in fields(cls)]
+        out: dict[str, Any] = {}
+        for name in names:
+            vals = [getattr(p, name) for p in parts]
+            out[name] = None if any(v is None for v in vals) else np.concatenate(vals)
+        return cls(**out)

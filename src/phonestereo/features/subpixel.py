@@ -27,11 +27,14 @@ band-limited texture shifted by an exact Fourier shift the bias is < 0.004 px at
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
+from phonestereo.features._threads import background
 from phonestereo.features.crlb import sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
 
@@ -47,6 +50,7 @@ _PREFILTER = np.sqrt(3.0) * _Z ** np.abs(np.arange(-_TAPS, _TAPS + 1))
 PREFILTER_MARGIN = _TAPS + 2
 N_PARAMS = 6  # d, e, gain, offset, s_x, s_y
 _SIXTH = np.float32(1.0 / 6.0)
+SPLIT_AT = 96  #: from this many windows, two halves (the second on the helper thread)
 
 
 def bspline_coefficients(image: F32) -> F32:
@@ -129,6 +133,11 @@ def sample_windows(
     for k in range(1, 4):
         val += wx[:, k] * rowsum[flat + k]
     return val.reshape(n, m, m), ok
+
+
+def _wsum(a: NDArray[Any], w: NDArray[Any]) -> NDArray[Any]:
+    """Σ_p a[k, p]·w[p] per row, without BLAS (its gemv wakes a second thread per call)."""
+    return np.einsum("kp,p->k", a, w)
 
 
 def gaussian_window(radius: int, sigma_w: float) -> F64:
@@ -269,8 +278,27 @@ def refine_lk(
     x0, y0 = xy[:, 0], xy[:, 1]
     if n and (x0.min() < r or y0.min() < r or x0.max() >= w - r or y0.max() >= h - r):
         raise InputError(f"windows of radius {r} must lie inside the left image {w}×{h}")
+    left = np.asarray(left, np.float32)
+    d0, e0 = np.broadcast_to(d0, (n,)), np.broadcast_to(e0, (n,))
+    opts = (r, sigma_w, slant, max_slant, max_iter, tol, max_step, influence)
+    if n < SPLIT_AT:
+        return _refine(left, right_coef, xy, d0, e0, *opts)
+    # two halves always (the same numbers with one thread or two), the second on the helper
+    # thread: independent windows, and NumPy releases the GIL in their array work
+    k = n // 2
+    other = background(_refine, left, right_coef, xy[k:], d0[k:], e0[k:], *opts)
+    first = _refine(left, right_coef, xy[:k], d0[:k], e0[:k], *opts)
+    return Refinement.concat([first, other.result()])
+
+
+def _refine(
+    left: F32, right_coef: F32, xy: I64, d0: F64, e0: F64, r: int, sigma_w: float, slant: bool,
+    max_slant: float, max_iter: int, tol: float, max_step: float, influence: bool,
+) -> Refinement:
+    """:func:`refine_lk` of a batch of windows (checked inside ``left``)."""
+    n, x0, y0 = len(xy), xy[:, 0], xy[:, 1]
     npar = N_PARAMS if slant else 4
-    tmpl, tgx, tgy = _image_gradients(np.asarray(left, np.float32), x0, y0, r)
+    tmpl, tgx, tgy = _image_gradients(left, x0, y0, r)
     wts = gaussian_window(r, sigma_w).ravel()
     wn = wts / wts.sum()
     u = np.arange(-r, r + 1, dtype=np.float64)
@@ -300,16 +328,16 @@ def refine_lk(
         val32 = val.reshape(len(active), -1)
         t = tmpl[active]
         if it == 0:  # photometric start: match the weighted mean and standard deviation
-            mt, mr = t @ wn32, val32 @ wn32
-            st = np.sqrt(np.maximum(((t - mt[:, None]) ** 2) @ wn32, 0))
-            sr = np.sqrt(np.maximum(((val32 - mr[:, None]) ** 2) @ wn32, 0))
+            mt, mr = _wsum(t, wn32), _wsum(val32, wn32)
+            st = np.sqrt(np.maximum(_wsum((t - mt[:, None]) ** 2, wn32), 0))
+            sr = np.sqrt(np.maximum(_wsum((val32 - mr[:, None]) ** 2, wn32), 0))
             th[:, 2] = st / np.maximum(sr, 1e-6)
             th[:, 3] = mt - th[:, 2] * mr
         v64 = val32.astype(np.float64)
         a, b = th[:, 2].copy(), th[:, 3].copy()
         g1 = gram1[active]
         pv = np.einsum("kqp,kp->kq", bw[active], v64)  # Σ w b_i R
-        rr, rl = (v64 * v64) @ wts, (v64 * t64[active]) @ wts  # Σ w R², Σ w R L
+        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[active], wts)  # Σ w R², Σ w R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
@@ -335,25 +363,25 @@ def refine_lk(
             g2 = _gram(
                 gram2[ai],
                 np.einsum("kqp,kp->kq", bw[ai], v64[i] * wts),
-                (v64[i] ** 2) @ (wts**2),
+                _wsum(v64[i] ** 2, wts**2),
             )
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())
             cov[ai] = c_cov[:, :2, :2]
             res = t64[ai] - a[i, None] * v64[i] - b[i, None]
-            rvar[ai] = (res * res) @ wts / np.maximum(dof, 1.0)
+            rvar[ai] = _wsum(res * res, wts) / np.maximum(dof, 1.0)
             if influence:  # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]
                 resid[ai] = res
                 hc, _ = solve_spd(hess[i], c)
                 full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
                 infl[ai] = hc[:, :2] @ full
-            tc = t[i] - (t[i] @ wn32)[:, None]
-            vc = val32[i] - (val32[i] @ wn32)[:, None]
-            den = np.sqrt(((tc**2) @ wn32) * ((vc**2) @ wn32))
-            zncc[ai] = ((tc * vc) @ wn32) / np.maximum(den, 1e-12)
+            tc = t[i] - _wsum(t[i], wn32)[:, None]
+            vc = val32[i] - _wsum(val32[i], wn32)[:, None]
+            den = np.sqrt(_wsum(tc**2, wn32) * _wsum(vc**2, wn32))
+            zncc[ai] = _wsum(tc * vc, wn32) / np.maximum(den, 1e-12)
             ok_out[ai] = True
         active = active[~(fin | bad)]
-    tc = tmpl - (tmpl @ wn)[:, None]
+    tc = tmpl - _wsum(tmpl, wn)[:, None]
     return Refinement(
         d=theta[:, 0].copy(),
         e=theta[:, 1].copy(),
@@ -365,7 +393,7 @@ def refine_lk(
         cov_unit=cov,
         residual_var=rvar,
         zncc=zncc,
-        template_std=np.sqrt((tc**2) @ wn),
+        template_std=np.sqrt(_wsum(tc**2, wn)),
         influence=infl if influence else None,
         residual=resid if influence else None,
     )

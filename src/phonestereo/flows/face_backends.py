@@ -84,9 +84,12 @@ def default_backend() -> LandmarkBackend:
     bench: the chart plane averages the faces' IPDs); the tele, guided by the wide's faces,
     is only measured. The tele's faces are three times larger and only pair the faces and
     start the disparity search (the eye windows refine it), so it needs no mirror averaging.
+    The wide's detector sees its tiles shrunk to at most 1024 px by a whole factor (a 12 MP
+    image's tiles as a 2000 × 1500 image's; the landmarks are measured at full resolution).
     """
     return PairBackend(
-        MediaPipeBackend(mirror_average=False, two_level_tiles=(0.35, 0.08)),
+        MediaPipeBackend(mirror_average=False, two_level_tiles=(0.35, 0.08),
+                         detector_max_px=1024),
         MediaPipeBackend(min_tile_px=1000, mirror_average=False),
     )
 

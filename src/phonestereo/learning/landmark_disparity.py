@@ -138,7 +138,6 @@ def _gray32(image: Any) -> F32:
 @dataclass(frozen=True)
 class _Rectified:
     left: F32
-    left_coef: F32
     right: F32
     right_coef: F32
     sigma_left: float
@@ -148,9 +147,10 @@ class _Rectified:
 def _prepare(rect: Rectification, image_wide: Any, image_tele: Any) -> _Rectified:
     lw, rt = rect.remap(image_wide, image_tele)
     left, right = _gray32(lw), _gray32(rt)
+    # refine_lk filters the template's gradients from ``left`` itself: only the right image
+    # needs its B-spline coefficients (the left's cost 5-10 ms at 12 MP for nothing).
     return _Rectified(
         left,
-        bspline_coefficients(left),
         right,
         bspline_coefficients(right),
         noise_sigma(left),
@@ -217,7 +217,7 @@ def _refine_faces(
         idx = [k for k, w in found.items() if w.radius == r]
         group = [found[k] for k in idx]
         ref = refine_lk(
-            img.left, img.left_coef, img.right_coef,
+            img.left, None, img.right_coef,
             np.concatenate([w.xy for w in group]), np.concatenate([w.d0 for w in group]),
             np.concatenate([w.e0 for w in group]), radius=r, slant=False,
         )

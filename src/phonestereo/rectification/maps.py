@@ -151,6 +151,13 @@ def check_pair(
     return images
 
 
+def antialias_sigma(shrink: float) -> float:
+    """The Gaussian σ (raw px) :func:`remap_image` blurs with before shrinking by ``shrink``
+    (its rule, repeated for :meth:`Rectification.remap`'s source box, which must cover the
+    kernel; tests/rectification/test_rect_source_box.py checks that the two agree)."""
+    return 0.5 * (shrink - 1.0) if shrink > 1.0 + 1e-6 else 0.0
+
+
 def remap_image(
     image: NDArray[Any],
     map_x: NDArray[np.float32],

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -274,6 +275,56 @@ class Rectification:
         for role, img in zip(("wide", "tele"), images, strict=True):
             raw, rect, _ = self._chain(role)
             shrink = raw.f / rect.f
-            mx, my = self._maps(role, None)
-            out.append(maps.remap_image(img, mx, my, shrink, self.options.antialias, interpolation))
+            (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
+            out.append(maps.remap_image(
+                img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
+            ))
         return out[0], out[1]
+
+    def _source(
+        self, role: str, shrink: float, size: tuple[int, int]
+    ) -> tuple[tuple[int, int, int, int], NDArray[np.float32], NDArray[np.float32]]:
+        """The raw box (x0, y0, x1, y1) the maps sample and the maps shifted into it (cached).
+
+        When the image is blurred against aliasing (``antialias``, shrink > 1) only this box is
+        blurred and remapped: a window rectification samples a part of a 12 MP tele. The box
+        holds every tap of every sampled pixel plus the blur's kernel radius, so the result is
+        bit-identical to blurring the whole image (the maps move by whole pixels, exact in
+        float32; tests/rectification/test_rect_source_box.py).
+        """
+        key = (f"source-{role}-{size}", int(self.options.antialias and shrink > 1.0 + 1e-6))
+        if key not in self._cache:
+            mx, my = self._maps(role, None)
+            w, h = size
+            box = (0, 0, w, h)
+            # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
+            m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
+            if key[1] and not _corners_span(mx, my, m, size):
+                ok = cv2.compare(mx, float(maps.INVALID), cv2.CMP_NE)  # uint8 mask
+                if cv2.countNonZero(ok):
+                    (x_lo, x_hi, *_), (y_lo, y_hi, *_) = (cv2.minMaxLoc(a, ok) for a in (mx, my))
+                    lo = np.floor([x_lo, y_lo]).astype(int) - m
+                    hi = np.ceil([x_hi, y_hi]).astype(int) + m + 1
+                    box = (max(int(lo[0]), 0), max(int(lo[1]), 0),
+                           min(int(hi[0]), w), min(int(hi[1]), h))
+            if box[2] <= box[0] or box[3] <= box[1]:
+                box = (0, 0, w, h)
+            if box[:2] != (0, 0):
+                mx = np.where(mx == np.float32(maps.INVALID), mx, mx - np.float32(box[0]))
+                my = np.where(my == np.float32(maps.INVALID), my, my - np.float32(box[1]))
+            self._cache[key] = (box, mx, my)  # type: ignore[assignment]
+        box, mx, my = self._cache[key]  # type: ignore[misc]
+        return box, mx, my
+
+
+def _corners_span(mx: NDArray[np.float32], my: NDArray[np.float32], margin: int,
+                  size: tuple[int, int]) -> bool:
+    """True when the maps' valid corner values, ± ``margin``, already reach every image border:
+    the box of all values (which holds the corners') is then the whole image (no search)."""
+    cx, cy = mx[[0, 0, -1, -1], [0, -1, 0, -1]], my[[0, 0, -1, -1], [0, -1, 0, -1]]
+    ok = cx != np.float32(maps.INVALID)
+    if not ok.any():
+        return False
+    cx, cy = cx[ok], cy[ok]
+    return bool(cx.min() - margin <= 0 and cy.min() - margin <= 0
+                and cx.max() + margin + 1 >= size[0] and cy.max() + margin + 1 >= size[1])

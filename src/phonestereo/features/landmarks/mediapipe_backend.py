@@ -44,7 +44,7 @@ from phonestereo.features.landmarks.base import (
     ImageLike,
     LandmarkBackend,
     Rejected,
-    as_rgb,
+    as_gray_or_rgb,
     make_result,
 )
 from phonestereo.features.landmarks.eyes import mediapipe_eyes
@@ -95,6 +95,11 @@ class MediaPipeBackend(LandmarkBackend):
         Also search the image turned by these many quarter turns counter-clockwise (MediaPipe
         misses faces rolled by more than ~45°); ``(0, 1, 2, 3)`` for any orientation, at 4×
         the time. Results are in the original image's pixels.
+    detector_max_px : int or None
+        Tiles larger than this are shrunk by a whole factor (area average, to at most this
+        side) before the face detector, which sees them at 192 px anyway; the landmarks are
+        still measured on full-resolution crops. None: the tiles as they are (a 12 MP image's
+        whole-image tile costs MediaPipe ~30 ms to take in and resize).
 
     Examples
     --------
@@ -113,6 +118,7 @@ class MediaPipeBackend(LandmarkBackend):
     mirror_average: bool = True
     quarter_turns: tuple[int, ...] = (0,)
     two_level_tiles: tuple[float, float] | None = None
+    detector_max_px: int | None = None
     name: str = "mediapipe"
 
     def __post_init__(self) -> None:
@@ -131,6 +137,11 @@ class MediaPipeBackend(LandmarkBackend):
             raise InputError(f"quarter_turns must be values in 0..3, got {self.quarter_turns}")
         if self.max_faces < 1:
             raise InputError(f"max_faces must be >= 1, got {self.max_faces}")
+        if self.detector_max_px is not None and self.detector_max_px < 192:
+            raise InputError(
+                f"detector_max_px must be >= 192 (the detector's input) or None, got "
+                f"{self.detector_max_px}"
+            )
 
     @contextlib.contextmanager
     def _models(self) -> Iterator[tuple[Any, Any]]:
@@ -174,14 +185,14 @@ class MediaPipeBackend(LandmarkBackend):
 
     def detect(self, image: ImageLike) -> FaceResult:
         """Faces of one image (array (H, W) gray / (H, W, 3) BGR uint8, or a path)."""
-        rgb = as_rgb(image)
+        rgb = as_gray_or_rgb(image)
         with self._models() as (det, mesh):
             return self._detect(rgb, det, mesh)
 
     def detect_many(self, images: Iterable[ImageLike]) -> list[FaceResult]:
         """Faces of each image, sharing one set of MediaPipe models."""
         with self._models() as (det, mesh):
-            return [self._detect(as_rgb(im), det, mesh) for im in images]
+            return [self._detect(as_gray_or_rgb(im), det, mesh) for im in images]
 
     def _detect(self, rgb: U8, det: Any, mesh: Any) -> FaceResult:
         h, w = rgb.shape[:2]
@@ -193,7 +204,7 @@ class MediaPipeBackend(LandmarkBackend):
             tiles = tile_grid(view.shape[1], view.shape[0], self.min_tile_px, self.two_level_tiles)
             n_tiles += len(tiles)
             sides |= {t[2] for t in tiles}
-            boxes = nms(_find_boxes(view, tiles, det))[: self.max_faces]
+            boxes = nms(_find_boxes(view, tiles, det, self.detector_max_px))[: self.max_faces]
             self._measure(view, boxes, k, mesh, faces, rejected)
         faces = _dedupe(faces)
         rejected = [r for r in rejected if not _covered(r, faces)]
@@ -215,7 +226,7 @@ class MediaPipeBackend(LandmarkBackend):
         *measure* stage of the module docstring). On a 2000 × 1500 image with a few faces this
         is ~4× faster than :meth:`detect`, whose tiled search is most of the cost.
         """
-        rgb = as_rgb(image)
+        rgb = as_gray_or_rgb(image)
         h, w = rgb.shape[:2]
         faces: list[Face] = []
         rejected: list[Rejected] = []
@@ -276,6 +287,7 @@ class MediaPipeBackend(LandmarkBackend):
         if n != side:
             interp = cv2.INTER_AREA if n < side else cv2.INTER_CUBIC
             crop = cv2.resize(crop, (n, n), interpolation=interp)
+        crop = _to_rgb(crop)  # a gray image is turned into RGB only here, after the resize
         runs = []
         for flip in (False, True) if self.mirror_average else (False,):
             img = np.ascontiguousarray(crop[:, ::-1]) if flip else crop
@@ -315,6 +327,20 @@ class MediaPipeBackend(LandmarkBackend):
         return Face(pupils, centres, pts[:, :2], yaw, score, np.array(box))
 
 
+def _shrunk(tile: U8, k: int) -> U8:
+    """``tile`` (sides multiples of ``k``) area-averaged over k × k blocks (OpenCV's fast
+    integer-ratio path); its normalised coordinates are unchanged (edge to edge)."""
+    if k <= 1:
+        return np.ascontiguousarray(tile)
+    h, w = tile.shape[:2]
+    return cv2.resize(tile, (w // k, h // k), interpolation=cv2.INTER_AREA)
+
+
+def _to_rgb(image: U8) -> U8:
+    """An (H, W, 3) RGB view of a gray (H, W) or RGB image (the models take RGB)."""
+    return cv2.cvtColor(image, cv2.COLOR_GRAY2RGB) if image.ndim == 2 else image
+
+
 def _central_mesh(res: Any) -> F64 | None:
     """Normalised landmarks (478, 3) of the mesh nearest the crop centre, or None."""
     best, best_d = None, np.inf
@@ -326,13 +352,17 @@ def _central_mesh(res: Any) -> F64 | None:
     return best
 
 
-def _find_boxes(rgb: U8, tiles: list[tuple[int, int, int]], det: Any) -> list[Box]:
-    """Face-detector boxes over all tiles, in full-image pixels (x0, y0, x1, y1, score)."""
+def _find_boxes(
+    rgb: U8, tiles: list[tuple[int, int, int]], det: Any, max_px: int | None = None
+) -> list[Box]:
+    """Face-detector boxes over all tiles, in full-image pixels (x0, y0, x1, y1, score);
+    tiles larger than ``max_px`` are shrunk first (:func:`_shrunk`)."""
     out: list[Box] = []
     for x0, y0, side in tiles:
-        tile = np.ascontiguousarray(rgb[y0 : y0 + side, x0 : x0 + side])
-        th, tw = tile.shape[:2]
-        res = det.process(tile)
+        tile = rgb[y0 : y0 + side, x0 : x0 + side]
+        k = 1 if max_px is None else -(-max(tile.shape[:2]) // max_px)
+        th, tw = (tile.shape[0] // k) * k, (tile.shape[1] // k) * k
+        res = det.process(_to_rgb(_shrunk(tile[:th, :tw], k)))
         for d in res.detections or ():
             b = d.location_data.relative_bounding_box
             bx0 = x0 - 0.5 + b.xmin * tw

@@ -121,9 +121,10 @@ def unrotate(points: F64, k: int, size: tuple[int, int]) -> F64:
 
 
 def crop_square(rgb: U8, X0: int, Y0: int, side: int) -> U8:
-    """The square ``side`` × ``side`` crop starting at pixel (X0, Y0), black past the border."""
+    """The square ``side`` × ``side`` crop starting at pixel (X0, Y0), black past the border
+    (as many channels as ``rgb``: (H, W) gray or (H, W, 3))."""
     h, w = rgb.shape[:2]
-    out = np.zeros((side, side, 3), dtype=np.uint8)
+    out = np.zeros((side, side, *rgb.shape[2:]), dtype=np.uint8)
     xa, ya, xb, yb = max(X0, 0), max(Y0, 0), min(X0 + side, w), min(Y0 + side, h)
     if xb > xa and yb > ya:
         out[ya - Y0 : yb - Y0, xa - X0 : xb - X0] = rgb[ya:yb, xa:xb]

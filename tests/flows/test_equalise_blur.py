@@ -1,0 +1,50 @@
+"""Blur equalisation in the ROI (flows/coarse.py): the blur it adds is the pair's blur
+difference, not a penalty for misalignment.
+
+A periscope module (random-1000) has its rectified rows 4 px off (heating, factory error) and a
+tele 1.8 % smaller than calibrated (focus breathing). Comparing the box at the coarse disparity
+alone, the estimator blurred the wide by 2.4-3 px (a misaligned pair correlates better the more
+it is blurred), and the windows then slid along the chart's edges: ±0.7 px per match.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from phonestereo.flows.coarse import equalise_blur
+
+
+def _pair(blur_right: float, scale: float, d: float, e: float) -> tuple[np.ndarray, np.ndarray]:
+    """A textured left image and the right one: the same scene seen ``d`` px to the left,
+    ``e`` rows up, scaled by ``scale`` about the centre, blurred by ``blur_right`` more."""
+    rng = np.random.default_rng(7)
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (480, 640)).astype(np.float32), (0, 0), 1.2)
+    tex = 60 + 0.6 * (tex - tex.min())  # mid-grey texture, no clipping
+    cy, cx = 240.0, 320.0
+    M = np.float32([[scale, 0, cx + d - scale * cx], [0, scale, cy + e - scale * cy]])
+    right = cv2.warpAffine(tex, M, (640, 480), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                           borderMode=cv2.BORDER_REFLECT)
+    if blur_right > 0:
+        right = cv2.GaussianBlur(right, (0, 0), blur_right)
+    return tex, right
+
+
+@pytest.mark.parametrize("e", [0.0, -4.3])
+@pytest.mark.parametrize("scale", [1.0, 0.982])
+def test_equal_blur_adds_none_whatever_the_misalignment(e: float, scale: float) -> None:
+    left, right = _pair(0.0, scale, 20.4, e)
+    # The pair has the same blur: at most the smallest candidate (0.4 px) may be added, for the
+    # Lanczos resampling of the right image (main chose 2.4 px with e = -4.3 and scale 0.982).
+    _, _, s_l, s_r = equalise_blur(left, right, (170, 120, 300, 240), 20.4, round(e))
+    assert s_l <= 0.4 and s_r == 0.0
+
+
+@pytest.mark.parametrize("e", [0.0, -4.3])
+def test_a_blurrier_tele_gets_its_blur_back(e: float) -> None:
+    left, right = _pair(1.4, 0.982, 20.4, e)
+    # The right image is blurred by σ = 1.4 px more: the wide gets the candidate nearest to it
+    # (1.0 or 1.4; the candidates are 0.4, 0.7, 1.0, 1.4, 1.8, ...).
+    _, _, s_l, _ = equalise_blur(left, right, (170, 120, 300, 240), 20.4, round(e))
+    assert 1.0 <= s_l <= 1.4
