@@ -19,22 +19,28 @@ needs_data = pytest.mark.skipif(
 )
 
 # measured (matches, median |d − GT| px): clean Adirondack 883, 0.0188; Piano 663, 0.0673;
-# motorcycle 605, 0.0727. Passing cases measured: Adirondack q95 771 (87 %) 0.0242, sharpened
-# 845 (96 %) 0.0200; Piano q95 579 (87 %) 0.0666, q85 517 (78 %) 0.0791, sharpened 549 (83 %)
-# 0.0644; motorcycle q95 618 0.0735, q85 645 0.0857, q70 628 0.0925, sharpened 530 (88 %)
-# 0.0728, denoised 594 (98 %) 0.0755. The misses below are limited upstream of the residual
-# tests: a one-sided denoiser wipes the low-contrast texture of the right image, so NCC
-# uniqueness (Adirondack 1192 → 844 of the searched keypoints) and the sub-pixel convergence
-# (796 → 536 within 10 iterations: the left's gradients no longer match the right's) lose
-# them. JPEG's medians are information-limited at this window: the quantisation error is the
-# windows' residual (Adirondack median σ_d 0.0178 → 0.0408 / 0.0514 px at q85 / q70, 2.3 /
-# 2.9×, as the median error 2.2 / 3.2×); the best 50 % of the q70 matches by σ_d still read
-# 0.048 px, a symmetric 0.5 px prefilter 0.055, a 19 × 19 window 0.049 and a 23 × 23 one 0.043
+# motorcycle 605, 0.0727. Passing cases measured: Adirondack q95 771 (87 %) 0.0242, q85 722
+# (82 %) 0.0262, q70 713 (81 %) 0.0371 (limit 0.0388), sharpened 845 (96 %) 0.0200; Piano q95
+# 579 (87 %) 0.0666, q85 519 (78 %) 0.0780, q70 500 (75 %) 0.0912 (limit 0.1010), sharpened 549
+# (83 %) 0.0644; motorcycle q95 618 0.0735, q85 632 0.1009, q70 651 0.1087 (limit 0.1091: the
+# wide window costs this scene's depth edges, 0.0857 / 0.0925 with the 15 × 15 one), sharpened
+# 530 (88 %) 0.0728, denoised 594 (98 %) 0.0755. JPEG q85 / q70 pass since the sub-pixel fit
+# takes a 23 × 23 window (σ_w 5 px) on both images prefiltered by a 0.5 px Gaussian when the
+# pair's misfit floor is ≥ 5 (MatchConfig.wide_floor: compression-limited; with the 15 × 15
+# window Adirondack read 0.0410 / 0.0613, Piano q70 0.1205).
+# The denoised misses are an information loss upstream of the residual tests: NLM h = 5 on an
+# image whose noise is 0.8 DN changes the right image by 6.5 DN rms (median, 7 px windows) where
+# Adirondack's clean matches are lost and 3.5 where they survive; of the clean matches with a
+# window σ of 8–16 DN only 17 % survive (81 % above 16 DN). The NCC score test loses 237 more
+# keypoints than on the clean pair (1694 → 1333 against 1731 → 1607) and the sub-pixel fit 143
+# more (796 → 521: 229 windows still move after 10 iterations, contracting by 0.8 per step,
+# because the left's gradients carry texture the right no longer has). Tried and not adopted:
+# 30 iterations (535 matches at 0.0393 px, over the limit, and motorcycle clean 0.0727 → 0.0752),
+# NCC on both images smoothed by 0.5 / 1 px (the score test recovers, uniqueness loses them;
+# Adirondack clean 883 → 855 / 776), a symmetric prefilter before the fit (no gain in
+# convergence), min_score 0.7 (Adirondack denoised 440)
 MISSES = {
-    ("Adirondack", "jpeg85"): "728 matches (82 %) but median 0.0410 px > 0.0388",
-    ("Adirondack", "jpeg70"): "675 matches (76 %) but median 0.0613 px > 0.0388",
     ("Adirondack", "denoised"): "keeps 47 % (415 of 883), median 0.0343 px",
-    ("Piano", "jpeg70"): "452 matches (68 %) but median 0.1205 px > 0.1010",
     ("Piano", "denoised"): "keeps 60 % (398 of 663), median 0.0738 px",
 }
 PARAMS = [
@@ -105,16 +111,19 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
     assert len(rows) == 16
     n100 = sum(r["matches"] >= 100 for r in rows)
     # acceptance ≥ 100 matches on ≥ 80 % of the pairs; measured with the default MatchConfig
-    # (the misfit floor in input-noise units, also after blur equalisation) 94–252, ≥ 100 on
-    # 15 of 16 (0–22 per pair when the floor was skipped after equalisation)
+    # (the misfit floor in input-noise units, also after blur equalisation; the pairs' floors
+    # are ≥ 5, so the compression-limited 23 × 23 fit applies) 97–302, ≥ 100 on 15 of 16
+    # (79–252 with the 15 × 15 fit; 0–22 per pair when the floor was skipped after
+    # equalisation)
     assert n100 >= 0.8 * len(rows), [r["matches"] for r in rows]
     # the rows line up to within the third party's calibration: measured median |e| 0.2–2.0 px
     assert all(r["median_abs_e_px"] < 3.0 for r in rows), [r["median_abs_e_px"] for r in rows]
     z = np.array([r["rms_z"] for r in rows])
-    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.47–0.92 (median
-    # 0.65) on 40–151 paired matches per pair. (Before the pairing used y' + e instead of
-    # y' − e: only the matches with |e| < 0.5 px paired on pairs whose rows are 1.5–2 px off,
-    # mostly wrong ones, and RMS z read 2–3 there.) The upper bound holds on every pair
+    # left→right vs right→left RMS z, acceptance 0.8–1.25 per pair. Measured 0.45–1.00 (median
+    # 0.82) on 36–119 paired matches per pair (0.47–0.92, median 0.65, with the 15 × 15 fit).
+    # (Before the pairing used y' + e instead of y' − e: only the matches with |e| < 0.5 px
+    # paired on pairs whose rows are 1.5–2 px off, mostly wrong ones, and RMS z read 2–3
+    # there.) The upper bound holds on every pair
     assert np.all(z <= 1.25), z
     assert np.all(z >= 0.4), z
 
@@ -123,9 +132,9 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
 # on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
 # are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
 # 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
-# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (13 of 16
-# pairs below 0.8)
-@pytest.mark.xfail(strict=True, reason="RMS z 0.47–0.92 per pair: common ISP misfit cancels")
+# show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (7 of 16
+# pairs below 0.8: 0.45–0.79; 13 of 16 with the 15 × 15 fit)
+@pytest.mark.xfail(strict=True, reason="RMS z 0.45–1.00 per pair: common ISP misfit cancels")
 def test_real_phone_pairs_consistency_lower_bound(phone_rows: list[dict]) -> None:
     z = np.array([r["rms_z"] for r in phone_rows])
     assert np.all(z >= 0.8), z

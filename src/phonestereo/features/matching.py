@@ -13,7 +13,10 @@ Stages (each counted in :attr:`MatchResult.counts`):
    (:mod:`~phonestereo.features.cfa`); then 2-D Lucas–Kanade (d, e, gain, offset,
    disparity gradient) on a cubic B-spline: no pixel locking
    (:mod:`~phonestereo.features.subpixel`); it must converge near the NCC peak, fit to within
-   the noise and not be ill-conditioned;
+   the noise and not be ill-conditioned. A pair whose misfit floor (below) says it is
+   compression-limited (``MatchConfig.wide_floor``: JPEG q85 and worse, phone JPEGs) is fitted
+   again with a wider window on both images prefiltered by a small Gaussian: the quantisation
+   error is then the residual, and it averages down with the window's area;
 4. **σ** — the Cramér–Rao covariance from the window's gradients and the image noise, raised to
    the window's residual misfit where it fits worse than noise (:mod:`~phonestereo.features.crlb`);
    windows fitting much worse than the pair's typical window (its misfit floor, measured on its
@@ -38,20 +41,19 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
 from phonestereo.features._threads import background
-from phonestereo.features.blur import equalise_pair
-from phonestereo.features.cfa import cfa_phase_contrast, suppress_cfa
+from phonestereo.features.blur import equalise_pair, gaussian_blur, gaussian_kernel
+from phonestereo.features.cfa import cfa_phase_contrast, shift_noise_factor, suppress_cfa
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
+from phonestereo.features.match_fit import NoiseModel, fit_windows, scaled
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
 from phonestereo.features.misfit import (
     correlation_factor,
-    misfit_floor,
-    misfit_tail,
     residual_correlation,
 )
 from phonestereo.features.search import SearchResult, ncc_search
-from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
+from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -180,51 +182,51 @@ def match_rectified(
         lc, rc, pf, sf = suppress_cfa(lc, rc, noise)
         noise, noise_in = (noise[0] * pf, noise[1] * pf), (noise_in[0] * pf, noise_in[1] * pf)
         shift_noise = (shift_noise[0] * sf[0], shift_noise[1] * sf[1])
-    ref = refine_lk(
-        lc,
-        None,  # the template gradients are filtered from the left windows directly
-        right_prep.result()[1] if added[1] == 0 and not cfa else bspline_coefficients(rc),
-        xy[idx],
-        s.d0[idx],
-        s.e0[idx],
-        radius=r,
-        sigma_w=cfg.sigma_w,
-        slant=cfg.slant,
-        max_slant=cfg.max_slant,
-        max_iter=cfg.max_iter,
-        tol=cfg.tol,
-        influence=cfg.correlated_misfit,
-    )
-    ok = ref.converged & (np.abs(ref.d - s.d0[idx]) <= cfg.max_shift)
-    ok &= np.abs(ref.e - s.e0[idx]) <= cfg.max_shift
+    coef = right_prep.result()[1] if added[1] == 0 and not cfa else bspline_coefficients(rc)
+    models = NoiseModel(noise, noise_in, shift_noise)
+    corr = cfg.correlated_misfit
+    fit = fit_windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w, models, cfg, corr)
+    wide = cfg.misfit_floor and fit.floor >= cfg.wide_floor and cfg.wide_radius > r
+    if wide:  # compression-limited: a larger window, the quantiser's high frequencies damped
+        l_wide, gain = gaussian_blur(lc, cfg.wide_prefilter_px)
+        r_wide = gaussian_blur(rc, cfg.wide_prefilter_px)[0]
+        r = int(cfg.wide_radius)
+        hh, ww = lc.shape
+        p = xy[idx]
+        idx = idx[(p[:, 0] >= r) & (p[:, 1] >= r) & (p[:, 0] < ww - r) & (p[:, 1] < hh - r)]
+        # the shift sees the prefiltered noise as white noise of variance ρ·σ² (ρ from the
+        # images' own gradient spectra, features/cfa.py), more than the per-pixel Σk² says
+        taps = gaussian_kernel(cfg.wide_prefilter_px)
+        rl, rr = (
+            shift_noise_factor(im, n, kernel=taps) for im, n in zip((lc, rc), noise, strict=True)
+        )
+        shift_wide = (shift_noise[0] * rl**0.5, shift_noise[1] * rr**0.5)
+        models = NoiseModel(scaled(noise, gain), scaled(noise_in, gain), shift_wide)
+        # the quantiser's residual is correlated over its blocks and the prefilter: σ_d from
+        # its pooled autocorrelation, not as if the 23 × 23 pixels were independent (not after
+        # a blur equalisation, whose even misfit the autocorrelation would read as noise)
+        corr = corr or (cfg.wide_correlated and added == (0.0, 0.0))
+        fit = fit_windows(
+            l_wide,
+            bspline_coefficients(r_wide),
+            xy[idx],
+            s.d0[idx],
+            s.e0[idx],
+            r,
+            cfg.wide_sigma_w,
+            models,
+            cfg,
+            corr,
+        )
+    ref, ok, floor, nbound = fit.ref, fit.ok.copy(), fit.floor, fit.nbound
+    noise, shift_noise, noise_var = fit.noise, fit.shift_noise, fit.noise_var
     counts["subpixel"] = int(ok.sum())
-    if cfg.noise_sigma is None and ok.any():  # texture inflates the image-based estimate
-        k = _noise_cap(noise, ref.residual_var[ok], ref.gain[ok])
-        noise, shift_noise = (noise[0] * k, noise[1] * k), (shift_noise[0] * k, shift_noise[1] * k)
-        noise_in = (noise_in[0] * k, noise_in[1] * k)
-    noise_var = noise[0] ** 2 + ref.gain**2 * noise[1] ** 2
-    # the pair's own misfit, in units of its input noise model: blur equalisation lowers the
-    # computed noise of the blurred image, not the misfit a clean pair shows (rectification,
-    # surfaces, interpolation), so `typical_misfit` keeps its meaning with or without it; a
-    # pair whose blur difference the equalisation explains reads ≤ 1 (no floor), an ISP's
-    # misfit beyond it raises the floor either way (features/misfit.py)
-    floor, nbound = 1.0, cfg.max_normalized_residual**2
-    if cfg.misfit_floor:
-        input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
-        floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
-        # the normalised residual's bound: raised by the pair's typical value, and to the
-        # upper tail of its own windows where their spread is wider (one-sided processing)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = ref.residual_var[ok] / ref.template_std[ok] ** 2
-        nbound *= misfit_floor(ratio, np.ones(len(ratio)), typical=cfg.typical_normalized)
-        tail = misfit_tail(ratio, k=cfg.normalized_tail)
-        nbound = max(nbound, tail) if np.isfinite(tail) else nbound
     with np.errstate(invalid="ignore"):
         ok &= ref.residual_var <= nbound * ref.template_std**2
         ok &= ref.residual_var <= cfg.max_residual_ratio**2 * floor * noise_var
         counts["residual"] = int(ok.sum())
     fd = fe = None
-    if cfg.correlated_misfit and ref.residual is not None and ref.influence is not None:
+    if corr and ref.residual is not None and ref.influence is not None:
         rho = residual_correlation(ref.residual[ok], 2 * r + 1)
         fd = correlation_factor(ref.influence[:, 0], rho)
         fe = correlation_factor(ref.influence[:, 1], rho)
@@ -260,6 +262,7 @@ def match_rectified(
         reason=why,
         blur_added=added,
         cfa_filtered=bool(cfa),
+        radius=r,
     )
 
 
@@ -267,20 +270,6 @@ def _right_preparation(right: F32, with_noise: bool) -> tuple[float, F32]:
     """The right image's noise σ (NaN unless ``with_noise``) and its B-spline coefficients."""
     noise = noise_sigma(right) if with_noise else float("nan")
     return noise, bspline_coefficients(right)
-
-
-def _noise_cap(noise: tuple[float, float], residual_var: F64, gain: F64) -> float:
-    """Factor ≤ 1 on the image-based noise σ (left, right): the typical window residual bounds it.
-
-    Fine texture inflates :func:`~phonestereo.features.crlb.noise_sigma`; the median residual
-    variance of the window fits, s² ≈ σ_L² + a²·σ_R² (per pixel), bounds it. One factor scales
-    both, so their ratio is kept: after blur equalisation one image's noise is a computed
-    fraction of the other's, and capping each at one common value would under-count the
-    noisier one. For σ_L = σ_R this is the cap min(σ, √median(s² / (1 + a²))) / σ.
-    """
-    model = noise[0] ** 2 + gain**2 * noise[1] ** 2
-    k = float(np.sqrt(np.median(residual_var / model)))
-    return min(k, 1.0) if np.isfinite(k) else 1.0
 
 
 def _keypoints(

@@ -30,12 +30,15 @@ smoothed noise). Two things are therefore measured on the pair's own converged w
 
 Both are computed with FFTs of the small window images (NumPy), a few ms for 2000 windows.
 
-Measured (benchmarks/bench_match_isp.py): the floor and the tail keep 82 / 76 % of
-Adirondack's matches at JPEG q85 / q70 (14 / 0 before) and the sharpened pair's 96 % (0
-before). The correlation factor is 0.9–1.4 on JPEG and ISP renders and changes no figure
-there; on a relative blur it reads the deterministic even misfit (which does not move d) as
-correlated noise and over-states σ_d (within σ 0.83–0.87), so the matcher leaves it off by
-default (``MatchConfig.correlated_misfit``).
+Measured (benchmarks/bench_match_isp.py): the floor and the tail keep 82 / 81 % of
+Adirondack's matches at JPEG q85 / q70 (14 / 0 before; 82 / 76 % before the compression-limited
+wide fit) and the sharpened pair's 96 % (0 before). The floor also decides that a pair is
+compression-limited (``MatchConfig.wide_floor``). The correlation factor is 0.9–1.4 on JPEG
+and ISP renders and changed no figure with the 15 × 15 window; on a relative blur it reads the
+deterministic even misfit (which does not move d) as correlated noise and over-states σ_d
+(within σ 0.83–0.87), so the matcher leaves it off by default (``MatchConfig.correlated_misfit``)
+except in the compression-limited 23 × 23 fit of a pair without blur equalisation, where the
+white σ under-states it (Adirondack JPEG q85 / q70 within σ 0.44 / 0.40 → 0.52 / 0.50).
 """
 
 from __future__ import annotations

@@ -336,6 +336,38 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "2×2 phase classes) above which cfa_filter acts.",
             "0.2: demosaiced images measure 0.5-1.0; resampled or Middlebury images 0.01-0.03.",
         ),
+        "wide_floor": (
+            "misfit floor",
+            "A pair whose misfit floor reads at least this is compression-limited: its "
+            "sub-pixel fit is redone with the wide window on prefiltered images.",
+            "5: JPEG q85/q70 read 6-22 and the phone pairs above 5, clean pairs 1-2.3, JPEG q95 "
+            "1.9-3.6, denoised 1.7-4.4. Adirondack q85/q70 median 0.041/0.061 -> 0.026/0.037 px.",
+        ),
+        "wide_radius": (
+            "px",
+            "Window half size of the compression-limited fit (the NCC search keeps radius).",
+            "11 (23 × 23): 9 reads 0.045 px on Adirondack q70, over the issue's 0.039.",
+        ),
+        "wide_sigma_w": (
+            "px",
+            "Gaussian weight σ of the compression-limited fit's window.",
+            "5: the default's ratio radius / σ_w ≈ 2.3 kept.",
+        ),
+        "wide_prefilter_px": (
+            "px",
+            "Gaussian σ applied to both images before the compression-limited fit (the noise "
+            "model is scaled by its Σk²).",
+            "0.5: damps the frequencies the quantiser coarsened (Adirondack q70 0.043 -> 0.037 "
+            "px); 1.0 leaves few windows.",
+        ),
+        "wide_correlated": (
+            "bool",
+            "In the compression-limited fit, σ_d from the residual's pooled autocorrelation "
+            "(as correlated_misfit), whatever correlated_misfit says; not after blur "
+            "equalisation.",
+            "On: the quantiser's error is correlated over its blocks; Adirondack q85/q70 within "
+            "σ 0.44/0.40 -> 0.52/0.50.",
+        ),
     },
 }
 
