@@ -170,6 +170,13 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "first fails the measurement as ambiguous.",
             "0.97: only near-equal peaks are ambiguous.",
         ),
+        "min_peak_t": (
+            "t",
+            "The first coarse peak must beat the second tile by tile (4 × 4 tiles, paired t "
+            "of their ZNCC differences) or the measurement fails as ambiguous.",
+            "3 (one-sided p ≈ 0.005): random-1013's chessboard alias t 1.5 (read 0.37 m for "
+            "2.40 m); folded-x3 demo 3.8-5.5.",
+        ),
         "fine_range_px": (
             "px",
             "The fine search is ± this around the coarse disparity.",

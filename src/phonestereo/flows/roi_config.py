@@ -36,6 +36,10 @@ class RoiConfig:
         The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
         away, a separate local maximum) above ``max_ambiguity`` × the first makes the
         measurement fail as ambiguous.
+    min_peak_t : float
+        The first coarse peak must beat the second tile by tile: the robust paired t of the
+        tiles' ZNCC differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach
+        this, else the measurement fails as ambiguous (a periodic texture's alias).
     match : MatchConfig
     """
 
@@ -52,6 +56,7 @@ class RoiConfig:
     coarse_rows: int = 8
     coarse_expand: float = 3.0
     max_ambiguity: float = 0.97
+    min_peak_t: float = 3.0
     fine_range_px: int = 3
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast

@@ -22,7 +22,8 @@ from scipy.optimize import least_squares
 from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
-from phonestereo.flows.coarse import coarse_disparity, equalise_blur
+from phonestereo.flows.coarse import equalise_blur
+from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
@@ -303,25 +304,15 @@ def measure_roi(
         # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
         # the ROI's own box is the last try.
         cboxes.append(box)
-    for cbox in cboxes:
-        d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
-        if np.isfinite(d0) and peak >= cfg.coarse_min_zncc and second < cfg.max_ambiguity * peak:
-            break
+    cbox, cp, pc, why = coarse_peak(lw, rt, cboxes, d_max, cfg)
     if cbox == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
+    d0, peak, e0 = cp.d, cp.peak, cp.e
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
-    if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
-        return _fail(
-            f"the ROI does not correlate with the tele (ZNCC {peak:.2f} < "
-            f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view",
-            grid, counts,
-        )
-    if second >= cfg.max_ambiguity * peak:
-        return _fail(
-            f"ambiguous disparity: two correlation peaks ({peak:.3f}, {second:.3f}) — a "
-            "repetitive texture without context; enlarge the ROI or aim at a distinct object",
-            grid, counts,
-        )
+    if pc is not None and np.isfinite(pc.t):
+        counts["coarse_peak_t_x10"] = round(10 * max(min(pc.t, 999.0), -999.0))
+    if why:
+        return _fail(why, grid, counts)
     counts["coarse_e_px"] = int(e0)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
