@@ -134,15 +134,16 @@ class PeakContrast:
 def _tile_scores(
     left: Any, right: Any, box: tuple[int, int, int, int], d: float, e: float, n: int,
     search_px: int,
-) -> tuple[F64, F64, F64]:
+) -> tuple[F64, F64, F64, F64, F64]:
     """Per tile of an n × n split of ``box``: best ZNCC within ±search_px of shift (d, e), its
-    disparity and the tile's centre x (NaN where the tile cannot be compared)."""
+    disparity and row offset (sub-pixel, parabola) and the tile's centre (x, y); NaN where the
+    tile cannot be compared. (n² small windows: a loop over tiles, not pixels.)"""
     x, y, w, h = box
     tw, th = w // n, h // n
     r = search_px
     H, W = right.shape[:2]
-    zs, ds, xs = np.full(n * n, np.nan), np.full(n * n, np.nan), np.full(n * n, np.nan)
-    for i in range(n * n):  # n² small windows: a loop over tiles, not pixels
+    out = np.full((5, n * n), np.nan)
+    for i in range(n * n):
         tx, ty = x + (i % n) * tw, y + (i // n) * th
         sx, sy = round(tx - d) - r, round(ty - e) - r
         tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
@@ -150,9 +151,70 @@ def _tile_scores(
             continue
         win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32)
         s = cv2.matchTemplate(win, tpl, cv2.TM_CCOEFF_NORMED)
-        k = int(np.argmax(s))
-        zs[i], ds[i], xs[i] = float(s.flat[k]), float(tx - (sx + k % s.shape[1])), tx + tw / 2
-    return zs, ds, xs
+        ky, kx = (int(v) for v in np.unravel_index(int(np.argmax(s)), s.shape))
+        fx = kx + _vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
+        fy = ky + _vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
+        out[:, i] = (float(s[ky, kx]), tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
+    return out[0], out[1], out[2], out[3], out[4]
+
+
+def _vertex(v: Any, k: int) -> float:
+    """Sub-pixel offset of a parabola's vertex through three samples (0 at an edge)."""
+    if k == 0 or len(v) < 3:
+        return 0.0
+    den = float(v[0] - 2 * v[1] + v[2])
+    return float(np.clip(0.5 * (v[0] - v[2]) / den, -0.5, 0.5)) if den < 0 else 0.0
+
+
+def tile_wt_scale(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    d: float,
+    e: float,
+    center_y: float,
+    tiles: int = 4,
+    search_px: int = 8,
+) -> tuple[float, int, float]:
+    """The W-T scale the tiles' row offsets show about the tele's rectified centre row:
+    (scale, tiles used, median tile ZNCC); scale NaN with fewer than 6 tiles.
+
+    A tele whose scale differs from the calibration's by s − 1 sees a wide row y at
+    c_y + (y − c_y)/s (:class:`~phonestereo.fixes.wt_scale.WTScale`), so the row offset of a
+    tile grows as (1 − 1/s)·(y − c_y) — whatever the depth (a slanted surface changes the
+    disparity, not the rows). A 3.7 % scale (random-1013's periscope) moves the rows of a
+    512-px box by ±9 px, enough to decorrelate it as a whole.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> rng = np.random.default_rng(0)
+    >>> a = cv2.GaussianBlur(rng.uniform(0, 255, (500, 400)).astype(np.float32), (0, 0), 3)
+    >>> m = np.float32([[1 / 1.03, 0, 0], [0, 1 / 1.03, 250 * (1 - 1 / 1.03)]])
+    >>> b = cv2.warpAffine(a, m, (400, 500))  # the tele: scaled 3 % about row 250
+    >>> s, n, z = tile_wt_scale(a, b, (40, 40, 320, 420), 0.0, 0.0, 250.0)
+    >>> bool(abs(s - 1.03) < 0.005), n, bool(z > 0.9)
+    (True, 16, True)
+    """
+    z, _, ee, _, yy = _tile_scores(left, right, box, d, e, tiles, search_px)
+    zm = float(np.nanmedian(z)) if np.isfinite(z).any() else float("nan")
+    ok = np.isfinite(z) & (z > 0.3)  # tiles that found their counterpart
+    if ok.sum() < 6 or np.ptp(yy[ok]) <= 0:
+        return float("nan"), int(ok.sum()), zm
+    b = float(np.polyfit(yy[ok] - center_y, ee[ok], 1)[0])
+    return 1.0 / (1.0 - b), int(ok.sum()), zm
+
+
+def rescale_tele(right: Any, scale: float, center: tuple[float, float]) -> Any:
+    """The rectified tele window scaled by ``scale`` about ``center`` (x, y): the pixel at q
+    moves to center + scale·(q − center), the W-T scale's correction of
+    :class:`~phonestereo.fixes.wt_scale.WTScale` applied to the image."""
+    k = 1.0 / scale
+    cx, cy = center
+    m = np.array([[k, 0, cx * (1 - k)], [0, k, cy * (1 - k)]], dtype=np.float32)
+    h, w = right.shape[:2]
+    flags = cv2.WARP_INVERSE_MAP | cv2.INTER_CUBIC
+    return cv2.warpAffine(right, m, (w, h), flags=flags, borderMode=cv2.BORDER_CONSTANT)
 
 
 def peak_contrast(
@@ -207,8 +269,8 @@ def peak_contrast(
     >>> pc.t > 10 and pc.zncc_first > 0.99 and pc.n == 16
     True
     """
-    z1, d1, x1 = _tile_scores(left, right, box, *first, tiles, search_px)
-    z2, _, _ = _tile_scores(left, right, box, *second, tiles, search_px)
+    z1, d1, _, x1, _ = _tile_scores(left, right, box, *first, tiles, search_px)
+    z2 = _tile_scores(left, right, box, *second, tiles, search_px)[0]
     ok = np.isfinite(z1) & np.isfinite(z2)
     n = int(ok.sum())
     if n < 6:
@@ -288,4 +350,6 @@ __all__ = [
     "coarse_search",
     "equalise_blur",
     "peak_contrast",
+    "rescale_tele",
+    "tile_wt_scale",
 ]

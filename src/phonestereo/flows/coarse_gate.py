@@ -10,11 +10,19 @@ fine matching then finds a tight, wrong plane around whichever peak the coarse s
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from phonestereo.flows.coarse import CoarsePeak, PeakContrast, coarse_search, peak_contrast
+from phonestereo.flows.coarse import (
+    CoarsePeak,
+    PeakContrast,
+    coarse_search,
+    peak_contrast,
+    rescale_tele,
+    tile_wt_scale,
+)
 from phonestereo.flows.roi_config import RoiConfig
 
 Box = tuple[int, int, int, int]
@@ -56,12 +64,40 @@ def coarse_verdict(
     return "", pc
 
 
-def coarse_peak(
+@dataclass(frozen=True)
+class CoarseChoice:
+    """The coarse step's choice (:func:`coarse_peak`).
+
+    Attributes
+    ----------
+    box : (x, y, w, h)
+        The coarse box used.
+    peak : CoarsePeak
+    contrast : PeakContrast or None
+        The tile test of its two peaks, when there were two.
+    reason : str
+        Why the ROI cannot be measured ("" when it can).
+    right : ndarray
+        The tele window the fine search must use: the input, or the input with the W-T scale
+        the tiles showed corrected (``scale``).
+    scale : float
+        That pre-correction (1.0: none).
+    tile_zncc : float
+        Median tile ZNCC at the first box's peak, when it was computed (NaN otherwise).
+    """
+
+    box: Box
+    peak: CoarsePeak
+    contrast: PeakContrast | None
+    reason: str
+    right: Any
+    scale: float = 1.0
+    tile_zncc: float = float("nan")
+
+
+def _first_usable(
     lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
-    """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
-    used: (box, peak, tile contrast, "") — or the last box's with the reason it cannot."""
-    assert boxes, "no coarse box"
     for cbox in boxes:
         cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg)
@@ -70,4 +106,45 @@ def coarse_peak(
     return cbox, cp, pc, why
 
 
-__all__ = ["coarse_peak", "coarse_verdict"]
+def coarse_peak(
+    lw: Any,
+    rt: Any,
+    boxes: list[Box],
+    d_max: int,
+    cfg: RoiConfig,
+    center: tuple[float, float] | None = None,
+) -> CoarseChoice:
+    """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
+    used — or the last box's with the reason it cannot.
+
+    With ``center`` (the tele's rectified principal point in the window; None when the flow
+    does not correct the W-T scale), a failure is retried once on the tele window corrected
+    for the W-T scale its tiles show (:func:`~phonestereo.flows.coarse.tile_wt_scale`) when
+    the tiles do correlate (median ≥ ``coarse_min_zncc``) and the scale is off by more than
+    ``coarse_max_scale_drift_px`` over the box: an uncorrected scale shifts a large box's
+    edges against its centre, and the whole-box correlation falls although every part of it
+    matches (random-1013's ×4.2 periscope at 3.6-4 m: whole box 0.22-0.30, tiles 0.52-0.62,
+    scale 3.7 %).
+    """
+    assert boxes, "no coarse box"
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
+    if not why or center is None:
+        return CoarseChoice(cbox, cp, pc, why, rt)
+    b0 = boxes[0]
+    p0 = cp if cbox == b0 else coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
+    if not np.isfinite(p0.d):
+        return CoarseChoice(cbox, cp, pc, why, rt)
+    s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
+    drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
+    if not tz >= cfg.coarse_min_zncc or not drift > cfg.coarse_max_scale_drift_px:
+        return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
+    rt_s = rescale_tele(rt, s, center)
+    cbox2, cp2, pc2, why2 = _first_usable(lw, rt_s, boxes, d_max, cfg)
+    if why2:
+        why2 = (f"{why2} (also after correcting the W-T scale {s:.3f} that the ROI's tiles "
+                f"show)")
+        return CoarseChoice(cbox2, cp2, pc2, why2, rt, tile_zncc=tz)
+    return CoarseChoice(cbox2, cp2, pc2, "", rt_s, s, tz)
+
+
+__all__ = ["CoarseChoice", "coarse_peak", "coarse_verdict"]

@@ -177,6 +177,14 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "3 (one-sided p ≈ 0.005): random-1013's chessboard alias t 1.5 (read 0.37 m for "
             "2.40 m); folded-x3 demo 3.8-5.5.",
         ),
+        "coarse_max_scale_drift_px": (
+            "px",
+            "When the coarse box fails but its tiles correlate and the W-T scale their rows "
+            "show moves the box's edges by more than this, retry on the tele corrected for it "
+            "(W-T scale fix on only).",
+            "2 px: below, the scale cannot decorrelate the box (random-1013's 3.7 %: 7-9 px; "
+            "whole box 0.22-0.30 → 0.95).",
+        ),
         "fine_range_px": (
             "px",
             "The fine search is ± this around the coarse disparity.",

@@ -40,6 +40,10 @@ class RoiConfig:
         The first coarse peak must beat the second tile by tile: the robust paired t of the
         tiles' ZNCC differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach
         this, else the measurement fails as ambiguous (a periodic texture's alias).
+    coarse_max_scale_drift_px : float
+        When the coarse box fails but its tiles correlate, and the W-T scale its tiles show
+        moves the box's edges by more than this against its centre, the coarse step retries
+        on the tele corrected for that scale (only with the W-T scale fix on).
     match : MatchConfig
     """
 
@@ -57,6 +61,7 @@ class RoiConfig:
     coarse_expand: float = 3.0
     max_ambiguity: float = 0.97
     min_peak_t: float = 3.0
+    coarse_max_scale_drift_px: float = 2.0
     fine_range_px: int = 3
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast

@@ -304,15 +304,21 @@ def measure_roi(
         # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
         # the ROI's own box is the last try.
         cboxes.append(box)
-    cbox, cp, pc, why = coarse_peak(lw, rt, cboxes, d_max, cfg)
-    if cbox == box and len(cboxes) > 1:
+    c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
+    center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
+    if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
-    d0, peak, e0 = cp.d, cp.peak, cp.e
+    d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
     if pc is not None and np.isfinite(pc.t):
         counts["coarse_peak_t_x10"] = round(10 * max(min(pc.t, 999.0), -999.0))
-    if why:
-        return _fail(why, grid, counts)
+    if np.isfinite(ch.tile_zncc):
+        counts["coarse_tile_zncc_x1000"] = round(1000 * ch.tile_zncc)
+    if ch.scale != 1.0:
+        counts["coarse_scale_x1e4"] = round(1e4 * ch.scale)
+    if ch.reason:
+        return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
@@ -347,11 +353,12 @@ def measure_roi(
     d, e, sd = res.d[idx], res.e[idx], res.sigma_d[idx]
     wt = None
     if wt_scale:
-        c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
+        # Tele points in the (possibly pre-scaled, coarse_gate) window: the fit finds what
+        # remains, and the scale reported is the product.
         fit = fit_wt_scale(xy, xy - np.column_stack([d, e]), c_tele, sigma_px=res.sigma_e[idx])
-        wt = fit
         if fit.ok:
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))
+        wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     plane = fit_plane(xy, d, sd)
     resid = d - plane.predict(xy)[0]
     good = np.abs(resid) <= max(4 * plane.scatter_px, 0.2)
