@@ -136,7 +136,12 @@ def coarse_peak(
         return CoarseChoice(cbox, cp, pc, why, rt)
     s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
-    if not tz >= cfg.coarse_min_zncc or not drift > cfg.coarse_max_scale_drift_px:
+    if not tz >= cfg.coarse_min_zncc:
+        if np.isfinite(tz) and "does not correlate" in why:
+            why += (f"; nor do its parts (median tile ZNCC {tz:.2f}): the tele sees it too "
+                    "blurred or not at all — focus on the object or move closer")
+        return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
+    if not drift > cfg.coarse_max_scale_drift_px:
         return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
     rt_s = rescale_tele(rt, s, center)
     cbox2, cp2, pc2, why2 = _first_usable(lw, rt_s, boxes, d_max, cfg)
