@@ -38,11 +38,17 @@ def coarse_verdict(
             f"the ROI does not correlate with the tele (ZNCC {cp.peak:.2f} < "
             f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view"
         ), None
-    if cp.at_end:
+    if cp.at_end and cp.d > 0:
         return (
             f"the correlation is highest at the end of the searched disparities "
             f"({cp.d:.0f} px): the object is nearer than {cfg.z_min_m} m, or a repetitive "
-            "texture; aim at a distinct object"
+            "texture; move back or aim at a distinct object"
+        ), None
+    if cp.at_end:
+        return (
+            f"the correlation is highest at the far end of the searched disparities "
+            f"({cp.d:.0f} px, beyond infinity): the calibration's disparity is off by more "
+            "than 2 px — recalibrate, or a repetitive texture; aim at a distinct object"
         ), None
     if cp.second >= cfg.max_ambiguity * cp.peak:
         return (
