@@ -124,38 +124,40 @@ def coarse_peak(
     used — or the last box's with the reason it cannot.
 
     With ``center`` (the tele's rectified principal point in the window; None when the flow
-    does not correct the W-T scale), a failure is retried once on the tele window corrected
-    for the W-T scale its tiles show (:func:`~phonestereo.flows.coarse.tile_wt_scale`) when
-    the tiles do correlate (median ≥ ``coarse_min_zncc``) and the scale is off by more than
-    ``coarse_max_scale_drift_px`` over the box: an uncorrected scale shifts a large box's
-    edges against its centre, and the whole-box correlation falls although every part of it
-    matches (random-1013's ×4.2 periscope at 3.6-4 m: whole box 0.22-0.30, tiles 0.52-0.62,
-    scale 3.7 %).
+    does not correct the W-T scale), the W-T scale the first box's tiles show
+    (:func:`~phonestereo.flows.coarse.tile_wt_scale`) is corrected on the tele window first
+    when the tiles correlate (median ≥ ``coarse_min_zncc``) and the scale moves the box's
+    edges by more than ``coarse_max_scale_drift_px`` against its centre. An uncorrected scale
+    decorrelates a large box although every part of it matches, and then the whole-box
+    comparison of two peaks means nothing: random-1013's ×4.2 periscope (scale 3.7 %) had
+    its box at 2.4 m correlate 0.55 (tiles 0.80) and the chessboard's alias one period away
+    win over the true disparity; corrected, the true peak wins 0.96 to 0.83, and at 3.6-4 m
+    the box correlates 0.95 instead of 0.22-0.30. If the corrected pair gives no usable peak
+    the uncorrected one is tried too.
     """
     assert boxes, "no coarse box"
-    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
-    if not why or center is None:
-        return CoarseChoice(cbox, cp, pc, why, rt)
     b0 = boxes[0]
-    p0 = cp if cbox == b0 else coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
-    if not np.isfinite(p0.d):
-        return CoarseChoice(cbox, cp, pc, why, rt)
-    s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
+    tz, s = float("nan"), float("nan")
+    if center is not None:
+        p0 = coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
+        if np.isfinite(p0.d):
+            s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
-    if not tz >= cfg.coarse_min_zncc:
-        if np.isfinite(tz) and "does not correlate" in why:
-            why += (f"; nor do its parts (median tile ZNCC {tz:.2f}): the tele sees it too "
-                    "blurred or not at all — focus on the object or move closer")
-        return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
-    if not drift > cfg.coarse_max_scale_drift_px:
-        return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
-    rt_s = rescale_tele(rt, s, center)
-    cbox2, cp2, pc2, why2 = _first_usable(lw, rt_s, boxes, d_max, cfg)
-    if why2:
-        why2 = (f"{why2} (also after correcting the W-T scale {s:.3f} that the ROI's tiles "
-                f"show)")
-        return CoarseChoice(cbox2, cp2, pc2, why2, rt, tile_zncc=tz)
-    return CoarseChoice(cbox2, cp2, pc2, "", rt_s, s, tz)
+    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+        rt_s = rescale_tele(rt, s, center)
+        cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg)
+        if not why:
+            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
+        why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
+    if not why:
+        return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
+    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+        why = why_s
+    elif np.isfinite(tz) and tz < cfg.coarse_min_zncc and "does not correlate" in why:
+        why += (f"; nor do its parts (median tile ZNCC {tz:.2f}): the tele sees it too "
+                "blurred or not at all — focus on the object or move closer")
+    return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
 
 
 __all__ = ["CoarseChoice", "coarse_peak", "coarse_verdict"]

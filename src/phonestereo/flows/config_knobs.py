@@ -174,16 +174,18 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "t",
             "The first coarse peak must beat the second tile by tile (4 × 4 tiles, paired t "
             "of their ZNCC differences) or the measurement fails as ambiguous.",
-            "3 (one-sided p ≈ 0.005): random-1013's chessboard alias t 1.5 (read 0.37 m for "
-            "2.40 m); folded-x3 demo 3.8-5.5.",
+            "2 (one-sided p ≈ 0.03): random-1013's chessboard alias t 1.5 (read 0.37 m for "
+            "2.40 m); true peaks: folded-x3 demo 3.8-5.5, periscope-x5 demo 2.3-2.8 (a threshold "
+            "of 3 gated 4 of its 18 captures).",
         ),
         "coarse_max_scale_drift_px": (
             "px",
-            "When the coarse box fails but its tiles correlate and the W-T scale their rows "
-            "show moves the box's edges by more than this, retry on the tele corrected for it "
-            "(W-T scale fix on only).",
-            "2 px: below, the scale cannot decorrelate the box (random-1013's 3.7 %: 7-9 px; "
-            "whole box 0.22-0.30 → 0.95).",
+            "When the W-T scale the coarse box's tiles show moves the box's edges by more than "
+            "this against its centre, the tele window is corrected for it before the coarse "
+            "and fine steps (W-T scale fix on only).",
+            "4 px: random-1013 (3.7 %, 9.5 px; its box correlated 0.22-0.55, corrected "
+            "0.95) and random-1000 (2 %, 5.6 px) are corrected; folded-x3 (1 %, 2.8 px) is "
+            "not (correcting it cost 0.35 → 0.41 % median).",
         ),
         "fine_range_px": (
             "px",

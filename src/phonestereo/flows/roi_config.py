@@ -37,13 +37,14 @@ class RoiConfig:
         away, a separate local maximum) above ``max_ambiguity`` × the first makes the
         measurement fail as ambiguous.
     min_peak_t : float
-        The first coarse peak must beat the second tile by tile: the robust paired t of the
+        The first coarse peak must beat the second tile by tile: the paired t of the
         tiles' ZNCC differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach
         this, else the measurement fails as ambiguous (a periodic texture's alias).
     coarse_max_scale_drift_px : float
-        When the coarse box fails but its tiles correlate, and the W-T scale its tiles show
-        moves the box's edges by more than this against its centre, the coarse step retries
-        on the tele corrected for that scale (only with the W-T scale fix on).
+        When the W-T scale the coarse box's tiles show moves its edges by more than this
+        against its centre, the tele window is corrected for that scale before the coarse and
+        fine steps (only with the W-T scale fix on;
+        :func:`~phonestereo.flows.coarse_gate.coarse_peak`).
     match : MatchConfig
     """
 
@@ -60,8 +61,8 @@ class RoiConfig:
     coarse_rows: int = 8
     coarse_expand: float = 3.0
     max_ambiguity: float = 0.97
-    min_peak_t: float = 3.0
-    coarse_max_scale_drift_px: float = 2.0
+    min_peak_t: float = 2.0
+    coarse_max_scale_drift_px: float = 4.0
     fine_range_px: int = 3
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast
