@@ -134,3 +134,20 @@ def test_an_uncorrected_wt_scale_is_corrected_before_the_whole_box_correlation()
     # coarse step needs ±0.3 px, the fine search then spans ±3 px).
     assert ch.reason == "" and abs(ch.scale - 1.037) < 0.004 and ch.peak.peak > 0.9
     assert abs(ch.peak.d - 10.0) < 0.3
+
+
+def test_two_disparity_bands_on_one_surface_are_no_measurement() -> None:
+    from phonestereo.flows.band_gate import band_reason, band_split
+
+    rng = np.random.default_rng(6)
+    xy = rng.uniform(0, 300, (400, 2))
+    flat = lambda p: (np.full(len(p), 12.0), np.zeros(len(p)))  # noqa: E731
+    one = 12.0 + rng.normal(0, 0.1, 400)
+    # random-1001's periscope: half the chart's matches 1.4 px above the other half.
+    two = np.where(rng.uniform(size=400) < 0.5, 12.0, 13.4) + rng.normal(0, 0.1, 400)
+    e = np.zeros(400)
+    assert band_reason(band_split(xy, one, e, 12.0, None, flat, RoiConfig()), RoiConfig()) == ""
+    split = band_split(xy, two, e, 12.0, None, flat, RoiConfig())
+    # ~200 beside the band of ~200 (ratio ~1 ≥ max_band_split 0.5), 1.4 px away (±0.1).
+    assert abs(split["band_gap_x10"] - 14) <= 1
+    assert "two disparities" in band_reason(split, RoiConfig())

@@ -192,6 +192,15 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "The fine search is ± this around the coarse disparity.",
             "3 px: the coarse step is good to ~1 px.",
         ),
+        "max_band_split": (
+            "ratio",
+            "Matches beside the surface's band (on its fuller side, within 3 majority "
+            "tolerances) over those in it: at or above this the measurement fails as two "
+            "disparities.",
+            "0.5: one surface gives 0-0.23 (folded-x3, periscope-x5, random-1011, -1013); "
+            "random-1001's periscope 0.95-1.03 (bands 1.4 px apart, read -13 % / +28 % at "
+            "4 m), random-1000's 0.63-1.06.",
+        ),
     },
     "match": {
         "detector": (

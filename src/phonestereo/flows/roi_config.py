@@ -45,6 +45,10 @@ class RoiConfig:
         against its centre, the tele window is corrected for that scale before the coarse and
         fine steps (only with the W-T scale fix on;
         :func:`~phonestereo.flows.coarse_gate.coarse_peak`).
+    max_band_split : float
+        The surface's matches must form one band about the plane: when the fuller side
+        beyond it (up to 3 majority tolerances) holds this many times the band's matches,
+        the measurement fails (two disparities, no single one).
     match : MatchConfig
     """
 
@@ -64,6 +68,7 @@ class RoiConfig:
     min_peak_t: float = 2.0
     coarse_max_scale_drift_px: float = 4.0
     fine_range_px: int = 3
+    max_band_split: float = 0.5
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast
     # chart), so only the contrast-relative residual test is kept; σ_d still includes misfit.

@@ -22,6 +22,7 @@ from scipy.optimize import least_squares
 from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
+from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.coarse import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
@@ -360,6 +361,11 @@ def measure_roi(
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))
         wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     plane = fit_plane(xy, d, sd)
+    split = band_split(res.xy + shift, res.d, res.e, m2, fit if wt is not None else None,
+                       plane.predict, cfg)
+    counts.update(split)
+    if band_reason(split, cfg):
+        return _fail(band_reason(split, cfg), grid, counts)
     resid = d - plane.predict(xy)[0]
     good = np.abs(resid) <= max(4 * plane.scatter_px, 0.2)
     counts["plane"] = int(good.sum())
