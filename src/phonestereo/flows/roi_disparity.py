@@ -361,11 +361,11 @@ def measure_roi(
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))
         wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     plane = fit_plane(xy, d, sd)
-    split = band_split(res.xy + shift, res.d, res.e, m2, fit if wt is not None else None,
-                       plane.predict, cfg)
-    counts.update(split)
-    if band_reason(split, cfg):
-        return _fail(band_reason(split, cfg), grid, counts)
+    if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
+        split = band_split(res.xy + shift, res.d, res.e, m2, fit, plane.predict, cfg)
+        counts.update(split)
+        if band_reason(split, cfg):
+            return _fail(band_reason(split, cfg), grid, counts)
     resid = d - plane.predict(xy)[0]
     good = np.abs(resid) <= max(4 * plane.scatter_px, 0.2)
     counts["plane"] = int(good.sum())
