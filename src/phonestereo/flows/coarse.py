@@ -6,22 +6,61 @@ blur equalisation evens out the two cameras' defocus before the windows are fitt
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 
+from phonestereo.geometry.checks import Array
 
-def coarse_disparity(
+F64 = Array
+
+
+@dataclass(frozen=True)
+class CoarsePeak:
+    """The whole-box correlation's answer (:func:`coarse_search`).
+
+    Attributes
+    ----------
+    d, e : float
+        Disparity of the highest peak (sub-pixel, parabola) and its whole-pixel row offset
+        (NaN when the box cannot be correlated).
+    peak : float
+        Its ZNCC.
+    second : float
+        The best *other* candidate: a local maximum more than 2 px away, or a lobe cut by an
+        end of the searched range (−inf when none).
+    d2, e2 : float
+        Where that candidate is (whole pixels; NaN when none).
+    at_end : bool
+        The highest peak lies at an end of the searched range: the correlation may still
+        rise beyond it, so its disparity is not located.
+    """
+
+    d: float
+    peak: float
+    e: float
+    second: float = float("-inf")
+    d2: float = float("nan")
+    e2: float = float("nan")
+    at_end: bool = False
+
+
+_NO_PEAK = CoarsePeak(float("nan"), float("nan"), float("nan"))
+
+
+def coarse_search(
     left: Any, right: Any, box: tuple[int, int, int, int], d_min: int, d_max: int, rows: int = 3
-) -> tuple[float, float, float, float]:
-    """Whole-window ZNCC disparity of a rectified box (cv2.matchTemplate): (d, peak ZNCC,
-    second peak (another local maximum > 2 px away), e) with e the whole-pixel row offset.
+) -> CoarsePeak:
+    """Whole-window ZNCC disparity of a rectified box (cv2.matchTemplate) with its competitor.
 
     The coarse step before sub-pixel matching: one large window (the expanded ROI) is far less
     ambiguous than 15-px windows on repetitive texture (a chessboard's period is within the
-    disparity range), so the fine search can then be narrowed to a few pixels around it. The
-    second peak is the best other local maximum more than 2 px away (an ambiguity measure).
+    disparity range), so the fine search can then be narrowed to a few pixels around it. Each
+    shift takes its best row within ±``rows``. The competitor is the best other local maximum
+    more than 2 px away (a broad main lobe is not ambiguity) — or an end of the range whose
+    lobe the range cuts (an alias lobe whose top lies just outside is still a competitor).
     """
     x, y, w, h = box
     tpl = np.ascontiguousarray(left[y : y + h, x : x + w], dtype=np.float32)
@@ -30,24 +69,220 @@ def coarse_disparity(
     ys0, ys1 = max(0, y - rows), min(H, y + h + rows)
     strip = np.ascontiguousarray(right[ys0:ys1, xs0:xs1], dtype=np.float32)
     if strip.shape[0] < h or strip.shape[1] < w or float(tpl.std()) < 1e-3:
-        return float("nan"), float("nan"), float("nan"), float("nan")
+        return _NO_PEAK
     score = cv2.matchTemplate(strip, tpl, cv2.TM_CCOEFF_NORMED)
     col = score.max(axis=0)  # best row per shift
     j = int(np.argmax(col))
-    row = int(np.argmax(score[:, j])) + ys0  # the tele row of the box's top at the peak
+
+    def d_e(k: int, sub: float = 0.0) -> tuple[float, float]:
+        row = int(np.argmax(score[:, k])) + ys0  # the tele row of the box's top at shift k
+        return float(x - (xs0 + k + sub)), float(y - row)
+
     peak = float(col[j])
     sub = 0.0
     if 0 < j < len(col) - 1:  # parabola through the peak: coarse only, ±0.5 px is enough
         den = col[j - 1] - 2 * col[j] + col[j + 1]
         sub = float(0.5 * (col[j - 1] - col[j + 1]) / den) if den < 0 else 0.0
-    # The second peak is the best *other local maximum* (a broad main lobe is not ambiguity).
-    inner = col[1:-1]
-    is_max = (inner >= col[:-2]) & (inner >= col[2:])
-    idx = np.flatnonzero(is_max) + 1
+    d, e = d_e(j, sub)
+    # Candidates: interior local maxima and the range's ends when their lobe is cut there.
+    pad = np.concatenate([[-np.inf], col, [-np.inf]])
+    is_max = (pad[1:-1] >= pad[:-2]) & (pad[1:-1] >= pad[2:])
+    idx = np.flatnonzero(is_max)
     idx = idx[np.abs(idx - j) > 2]
-    second = float(col[idx].max()) if idx.size else float("-inf")
-    d = x - (xs0 + j + sub)
-    return float(d), peak, second, float(y - row)
+    at_end = len(col) > 1 and j in (0, len(col) - 1)
+    if not idx.size:
+        return CoarsePeak(d, peak, e, at_end=at_end)
+    k = int(idx[np.argmax(col[idx])])
+    d2, e2 = d_e(k)
+    return CoarsePeak(d, peak, e, float(col[k]), d2, e2, at_end)
+
+
+def coarse_disparity(
+    left: Any, right: Any, box: tuple[int, int, int, int], d_min: int, d_max: int, rows: int = 3
+) -> tuple[float, float, float, float]:
+    """:func:`coarse_search` as (d, peak ZNCC, second peak, e)."""
+    p = coarse_search(left, right, box, d_min, d_max, rows)
+    return p.d, p.peak, p.second, p.e
+
+
+@dataclass(frozen=True)
+class PeakContrast:
+    """Whether the first coarse peak beats the second tile by tile (:func:`peak_contrast`).
+
+    Attributes
+    ----------
+    t : float
+        Paired t statistic of the tiles' ZNCC differences (first − second): their
+        mean over its standard error (sd / √n), Student-t with n − 1 degrees of freedom when
+        the peaks are equally good. NaN with too few tiles.
+    n : int
+        Tiles compared.
+    zncc_first, zncc_second : float
+        Median tile ZNCC at each peak (each tile at its best shift within ±``search_px``).
+    slope : float
+        Drift of the tiles' best disparity across x at the first peak, px per px (a W-T scale
+        error of the uncorrected pair: 0.03 = the tele's scale is 3 % off).
+    """
+
+    t: float
+    n: int
+    zncc_first: float
+    zncc_second: float
+    slope: float
+
+
+def _tile_scores(
+    left: Any, right: Any, box: tuple[int, int, int, int], d: float, e: float, n: int,
+    search_px: int,
+) -> tuple[F64, F64, F64, F64, F64]:
+    """Per tile of an n × n split of ``box``: best ZNCC within ±search_px of shift (d, e), its
+    disparity and row offset (sub-pixel, parabola) and the tile's centre (x, y); NaN where the
+    tile cannot be compared. (n² small windows: a loop over tiles, not pixels.)"""
+    x, y, w, h = box
+    tw, th = w // n, h // n
+    r = search_px
+    H, W = right.shape[:2]
+    out = np.full((5, n * n), np.nan)
+    for i in range(n * n):
+        tx, ty = x + (i % n) * tw, y + (i // n) * th
+        sx, sy = round(tx - d) - r, round(ty - e) - r
+        tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
+        if sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H or tpl.std() < 1e-3:
+            continue
+        win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32)
+        s = cv2.matchTemplate(win, tpl, cv2.TM_CCOEFF_NORMED)
+        ky, kx = (int(v) for v in np.unravel_index(int(np.argmax(s)), s.shape))
+        fx = kx + _vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
+        fy = ky + _vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
+        out[:, i] = (float(s[ky, kx]), tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
+    return out[0], out[1], out[2], out[3], out[4]
+
+
+def _vertex(v: Any, k: int) -> float:
+    """Sub-pixel offset of a parabola's vertex through three samples (0 at an edge)."""
+    if k == 0 or len(v) < 3:
+        return 0.0
+    den = float(v[0] - 2 * v[1] + v[2])
+    return float(np.clip(0.5 * (v[0] - v[2]) / den, -0.5, 0.5)) if den < 0 else 0.0
+
+
+def tile_wt_scale(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    d: float,
+    e: float,
+    center_y: float,
+    tiles: int = 4,
+    search_px: int = 8,
+) -> tuple[float, int, float]:
+    """The W-T scale the tiles' row offsets show about the tele's rectified centre row:
+    (scale, tiles used, median tile ZNCC); scale NaN with fewer than 6 tiles.
+
+    A tele whose scale differs from the calibration's by s − 1 sees a wide row y at
+    c_y + (y − c_y)/s (:class:`~phonestereo.fixes.wt_scale.WTScale`), so the row offset of a
+    tile grows as (1 − 1/s)·(y − c_y) — whatever the depth (a slanted surface changes the
+    disparity, not the rows). A 3.7 % scale (random-1013's periscope) moves the rows of a
+    512-px box by ±9 px, enough to decorrelate it as a whole.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> rng = np.random.default_rng(0)
+    >>> a = cv2.GaussianBlur(rng.uniform(0, 255, (500, 400)).astype(np.float32), (0, 0), 3)
+    >>> m = np.float32([[1 / 1.03, 0, 0], [0, 1 / 1.03, 250 * (1 - 1 / 1.03)]])
+    >>> b = cv2.warpAffine(a, m, (400, 500))  # the tele: scaled 3 % about row 250
+    >>> s, n, z = tile_wt_scale(a, b, (40, 40, 320, 420), 0.0, 0.0, 250.0)
+    >>> bool(abs(s - 1.03) < 0.005), n, bool(z > 0.9)
+    (True, 16, True)
+    """
+    z, _, ee, _, yy = _tile_scores(left, right, box, d, e, tiles, search_px)
+    zm = float(np.nanmedian(z)) if np.isfinite(z).any() else float("nan")
+    ok = np.isfinite(z) & (z > 0.3)  # tiles that found their counterpart
+    if ok.sum() < 6 or np.ptp(yy[ok]) <= 0:
+        return float("nan"), int(ok.sum()), zm
+    b = float(np.polyfit(yy[ok] - center_y, ee[ok], 1)[0])
+    return 1.0 / (1.0 - b), int(ok.sum()), zm
+
+
+def rescale_tele(right: Any, scale: float, center: tuple[float, float]) -> Any:
+    """The rectified tele window scaled by ``scale`` about ``center`` (x, y): the pixel at q
+    moves to center + scale·(q − center), the W-T scale's correction of
+    :class:`~phonestereo.fixes.wt_scale.WTScale` applied to the image."""
+    k = 1.0 / scale
+    cx, cy = center
+    m = np.array([[k, 0, cx * (1 - k)], [0, k, cy * (1 - k)]], dtype=np.float32)
+    h, w = right.shape[:2]
+    flags = cv2.WARP_INVERSE_MAP | cv2.INTER_CUBIC
+    return cv2.warpAffine(right, m, (w, h), flags=flags, borderMode=cv2.BORDER_CONSTANT)
+
+
+def peak_contrast(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    first: tuple[float, float],
+    second: tuple[float, float],
+    tiles: int = 4,
+    search_px: int = 3,
+) -> PeakContrast:
+    """Does the first coarse peak beat the second everywhere, or only by chance?
+
+    A periodic texture (a chessboard) correlates as well at a shift by its period as at the
+    true disparity; only its few non-periodic parts (the chart's circles, its border) tell
+    them apart. The whole-box ZNCC of the two peaks then differs by a few hundredths, less
+    than what an uncorrected W-T scale, blur or noise changes (random-1013's ×4.2 periscope:
+    the wrong peak won 0.553 to 0.528 and the capture read 0.37 m for 2.40 m). The box is split
+    into ``tiles`` × ``tiles`` tiles; each is correlated at both peaks (its best shift within
+    ±``search_px``, which absorbs a scale drift across the box) and the paired differences are
+    tested: their mean over its standard error (a paired t test over the tiles). A distinct
+    texture wins in every tile (t in the tens); a periodic one only where its non-periodic
+    parts are (the folded-x3 demo's chart border: t 3.8-5.5 with 4 × 4 tiles); an alias wins
+    by noise (|t| ≲ 2: random-1013, t 1.5). Two surfaces of similar area in the box also give
+    a small t (large differences of both signs): the box is then ambiguous too, and
+    :func:`~phonestereo.flows.coarse_gate.coarse_peak` tries the next, smaller box.
+
+    Parameters
+    ----------
+    left, right : ndarray
+        The rectified pair.
+    box : (x, y, w, h)
+        The coarse box in ``left``.
+    first, second : (d, e)
+        The two peaks (disparity, row offset), px.
+    tiles : int
+        Tiles per side.
+    search_px : int
+        Each tile's search either side of each peak, px.
+
+    Returns
+    -------
+    PeakContrast
+
+    Examples
+    --------
+    >>> import cv2
+    >>> rng = np.random.default_rng(0)
+    >>> a = cv2.GaussianBlur(rng.uniform(0, 255, (240, 320)).astype(np.float32), (0, 0), 2)
+    >>> b = np.roll(a, -10, axis=1)  # the tele sees it shifted by d = 10
+    >>> pc = peak_contrast(a, b, (60, 40, 200, 160), (10.0, 0.0), (40.0, 0.0))
+    >>> pc.t > 10 and pc.zncc_first > 0.99 and pc.n == 16
+    True
+    """
+    z1, d1, _, x1, _ = _tile_scores(left, right, box, *first, tiles, search_px)
+    z2 = _tile_scores(left, right, box, *second, tiles, search_px)[0]
+    ok = np.isfinite(z1) & np.isfinite(z2)
+    n = int(ok.sum())
+    if n < 6:
+        return PeakContrast(float("nan"), n, float("nan"), float("nan"), float("nan"))
+    diff = z1[ok] - z2[ok]
+    mean, sd = float(np.mean(diff)), float(np.std(diff, ddof=1))
+    se = sd / np.sqrt(n)
+    t = mean / se if se > 0 else float(np.copysign(np.inf, mean)) if mean != 0 else 0.0
+    slope = float("nan")
+    if np.ptp(x1[ok]) > 0:
+        slope = float(np.polyfit(x1[ok], d1[ok], 1)[0])
+    return PeakContrast(t, n, float(np.median(z1[ok])), float(np.median(z2[ok])), slope)
 
 
 def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
@@ -182,4 +417,13 @@ def equalise_blur(
     return a, b, s_l, s_r
 
 
-__all__ = ["coarse_disparity", "equalise_blur"]
+__all__ = [
+    "CoarsePeak",
+    "PeakContrast",
+    "coarse_disparity",
+    "coarse_search",
+    "equalise_blur",
+    "peak_contrast",
+    "rescale_tele",
+    "tile_wt_scale",
+]

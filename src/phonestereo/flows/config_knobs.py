@@ -171,10 +171,36 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "first fails the measurement as ambiguous.",
             "0.97: only near-equal peaks are ambiguous.",
         ),
+        "min_peak_t": (
+            "t",
+            "The first coarse peak must beat the second tile by tile (4 × 4 tiles, paired t "
+            "of their ZNCC differences) or the measurement fails as ambiguous.",
+            "2 (one-sided p ≈ 0.03): random-1013's chessboard alias t 1.5 (read 0.37 m for "
+            "2.40 m); true peaks: folded-x3 demo 3.8-5.5, periscope-x5 demo 2.3-2.8 (a threshold "
+            "of 3 gated 4 of its 18 captures).",
+        ),
+        "coarse_max_scale_drift_px": (
+            "px",
+            "When the W-T scale the coarse box's tiles show moves the box's edges by more than "
+            "this against its centre, the tele window is corrected for it before the coarse "
+            "and fine steps (W-T scale fix on only).",
+            "4 px: random-1013 (3.7 %, 9.5 px; its box correlated 0.22-0.55, corrected "
+            "0.95) and random-1000 (2 %, 5.6 px) are corrected; folded-x3 (1 %, 2.8 px) is "
+            "not (correcting it cost 0.35 → 0.41 % median).",
+        ),
         "fine_range_px": (
             "px",
             "The fine search is ± this around the coarse disparity.",
             "3 px: the coarse step is good to ~1 px.",
+        ),
+        "max_band_split": (
+            "ratio",
+            "Matches beside the surface's band (on its fuller side, within 3 majority "
+            "tolerances) over those in it: at or above this the measurement fails as two "
+            "disparities.",
+            "0.5: one surface gives 0-0.23 (folded-x3, periscope-x5, random-1011, -1013); "
+            "random-1001's periscope 0.95-1.03 (bands 1.4 px apart, read -13 % / +28 % at "
+            "4 m), random-1000's 0.63-1.06.",
         ),
     },
     "match": {

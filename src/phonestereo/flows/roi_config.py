@@ -36,6 +36,19 @@ class RoiConfig:
         The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
         away, a separate local maximum) above ``max_ambiguity`` × the first makes the
         measurement fail as ambiguous.
+    min_peak_t : float
+        The first coarse peak must beat the second tile by tile: the paired t of the
+        tiles' ZNCC differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach
+        this, else the measurement fails as ambiguous (a periodic texture's alias).
+    coarse_max_scale_drift_px : float
+        When the W-T scale the coarse box's tiles show moves its edges by more than this
+        against its centre, the tele window is corrected for that scale before the coarse and
+        fine steps (only with the W-T scale fix on;
+        :func:`~phonestereo.flows.coarse_gate.coarse_peak`).
+    max_band_split : float
+        The surface's matches must form one band about the plane: when the fuller side
+        beyond it (up to 3 majority tolerances) holds this many times the band's matches,
+        the measurement fails (two disparities, no single one).
     match : MatchConfig
     """
 
@@ -52,7 +65,10 @@ class RoiConfig:
     coarse_rows: int = 8
     coarse_expand: float = 3.0
     max_ambiguity: float = 0.97
+    min_peak_t: float = 2.0
+    coarse_max_scale_drift_px: float = 4.0
     fine_range_px: int = 3
+    max_band_split: float = 0.5
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast
     # chart), so only the contrast-relative residual test is kept; σ_d still includes misfit.

@@ -22,7 +22,9 @@ from scipy.optimize import least_squares
 from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
-from phonestereo.flows.coarse import coarse_disparity, equalise_blur
+from phonestereo.flows.band_gate import band_reason, band_split
+from phonestereo.flows.coarse import equalise_blur
+from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
@@ -303,25 +305,21 @@ def measure_roi(
         # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
         # the ROI's own box is the last try.
         cboxes.append(box)
-    for cbox in cboxes:
-        d0, peak, second, e0 = coarse_disparity(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
-        if np.isfinite(d0) and peak >= cfg.coarse_min_zncc and second < cfg.max_ambiguity * peak:
-            break
-    if cbox == box and len(cboxes) > 1:
+    c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
+    center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
+    if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
+    d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
     counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
-    if not np.isfinite(d0) or peak < cfg.coarse_min_zncc:
-        return _fail(
-            f"the ROI does not correlate with the tele (ZNCC {peak:.2f} < "
-            f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view",
-            grid, counts,
-        )
-    if second >= cfg.max_ambiguity * peak:
-        return _fail(
-            f"ambiguous disparity: two correlation peaks ({peak:.3f}, {second:.3f}) — a "
-            "repetitive texture without context; enlarge the ROI or aim at a distinct object",
-            grid, counts,
-        )
+    if pc is not None and np.isfinite(pc.t):
+        counts["coarse_peak_t_x10"] = round(10 * max(min(pc.t, 999.0), -999.0))
+    if np.isfinite(ch.tile_zncc):
+        counts["coarse_tile_zncc_x1000"] = round(1000 * ch.tile_zncc)
+    if ch.scale != 1.0:
+        counts["coarse_scale_x1e4"] = round(1e4 * ch.scale)
+    if ch.reason:
+        return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
@@ -356,12 +354,18 @@ def measure_roi(
     d, e, sd = res.d[idx], res.e[idx], res.sigma_d[idx]
     wt = None
     if wt_scale:
-        c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
+        # Tele points in the (possibly pre-scaled, coarse_gate) window: the fit finds what
+        # remains, and the scale reported is the product.
         fit = fit_wt_scale(xy, xy - np.column_stack([d, e]), c_tele, sigma_px=res.sigma_e[idx])
-        wt = fit
         if fit.ok:
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))
+        wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     plane = fit_plane(xy, d, sd)
+    if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
+        split = band_split(res.xy + shift, res.d, res.e, m2, fit, plane.predict, cfg)
+        counts.update(split)
+        if band_reason(split, cfg):
+            return _fail(band_reason(split, cfg), grid, counts)
     resid = d - plane.predict(xy)[0]
     good = np.abs(resid) <= max(4 * plane.scatter_px, 0.2)
     counts["plane"] = int(good.sum())

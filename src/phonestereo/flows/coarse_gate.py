@@ -1,0 +1,163 @@
+"""The coarse step's choice and gate (ROI disparity, thesis §4.1.3; issue #18).
+
+The whole-box correlation (:func:`~phonestereo.flows.coarse.coarse_search`) of the first usable
+coarse box gives the disparity the fine search starts from — or the reason the ROI cannot be
+measured: no correlation, a peak at the end of the searched range, or two peaks the box does
+not tell apart. "Never a confident wrong number": on a periodic texture (the verification
+chessboard) a shift by one period correlates nearly as well as the true disparity, and the
+fine matching then finds a tight, wrong plane around whichever peak the coarse step chose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from phonestereo.flows.coarse import (
+    CoarsePeak,
+    PeakContrast,
+    coarse_search,
+    peak_contrast,
+    rescale_tele,
+    tile_wt_scale,
+)
+from phonestereo.flows.roi_config import RoiConfig
+
+Box = tuple[int, int, int, int]
+
+
+def coarse_verdict(
+    lw: Any, rt: Any, cbox: tuple[int, int, int, int], cp: CoarsePeak, cfg: RoiConfig
+) -> tuple[str, PeakContrast | None]:
+    """Why the coarse peak of one box cannot be used ("" when it can), and the tile contrast
+    of its two peaks when it was computed."""
+    if not np.isfinite(cp.d) or cp.peak < cfg.coarse_min_zncc:
+        return (
+            f"the ROI does not correlate with the tele (ZNCC {cp.peak:.2f} < "
+            f"{cfg.coarse_min_zncc}): no texture, occluded, or outside the tele's view"
+        ), None
+    if cp.at_end and cp.d > 0:
+        return (
+            f"the correlation is highest at the end of the searched disparities "
+            f"({cp.d:.0f} px): the object is nearer than {cfg.z_min_m} m, or a repetitive "
+            "texture; move back or aim at a distinct object"
+        ), None
+    if cp.at_end:
+        return (
+            f"the correlation is highest at the far end of the searched disparities "
+            f"({cp.d:.0f} px, beyond infinity): the calibration's disparity is off by more "
+            "than 2 px — recalibrate, or a repetitive texture; aim at a distinct object"
+        ), None
+    if cp.second >= cfg.max_ambiguity * cp.peak:
+        return (
+            f"ambiguous disparity: two correlation peaks ({cp.peak:.3f}, {cp.second:.3f}) — a "
+            "repetitive texture without context; enlarge the ROI or aim at a distinct object"
+        ), None
+    if not np.isfinite(cp.d2):
+        return "", None
+    # A periodic texture's alias peak is near the true one over the whole box by chance: the
+    # first must beat it tile by tile (coarse.peak_contrast), not only in the sum.
+    pc = peak_contrast(lw, rt, cbox, (cp.d, cp.e), (cp.d2, cp.e2))
+    if not pc.t >= cfg.min_peak_t:
+        return (
+            f"ambiguous disparity: the correlation peaks at {cp.d:.1f} px and {cp.d2:.0f} px "
+            f"(ZNCC {cp.peak:.3f}, {cp.second:.3f}) and the first wins only by chance over the "
+            f"box's tiles (t = {pc.t:.1f} < {cfg.min_peak_t}) — a repetitive texture; enlarge "
+            "the ROI over a distinct feature or aim at a distinct object"
+        ), pc
+    return "", pc
+
+
+@dataclass(frozen=True)
+class CoarseChoice:
+    """The coarse step's choice (:func:`coarse_peak`).
+
+    Attributes
+    ----------
+    box : (x, y, w, h)
+        The coarse box used.
+    peak : CoarsePeak
+    contrast : PeakContrast or None
+        The tile test of its two peaks, when there were two.
+    reason : str
+        Why the ROI cannot be measured ("" when it can).
+    right : ndarray
+        The tele window the fine search must use: the input, or the input with the W-T scale
+        the tiles showed corrected (``scale``).
+    scale : float
+        That pre-correction (1.0: none).
+    tile_zncc : float
+        Median tile ZNCC at the first box's peak, when it was computed (NaN otherwise).
+    """
+
+    box: Box
+    peak: CoarsePeak
+    contrast: PeakContrast | None
+    reason: str
+    right: Any
+    scale: float = 1.0
+    tile_zncc: float = float("nan")
+
+
+def _first_usable(
+    lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig
+) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
+    for cbox in boxes:
+        cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+        why, pc = coarse_verdict(lw, rt, cbox, cp, cfg)
+        if not why:
+            break
+    return cbox, cp, pc, why
+
+
+def coarse_peak(
+    lw: Any,
+    rt: Any,
+    boxes: list[Box],
+    d_max: int,
+    cfg: RoiConfig,
+    center: tuple[float, float] | None = None,
+) -> CoarseChoice:
+    """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
+    used — or the last box's with the reason it cannot.
+
+    With ``center`` (the tele's rectified principal point in the window; None when the flow
+    does not correct the W-T scale), the W-T scale the first box's tiles show
+    (:func:`~phonestereo.flows.coarse.tile_wt_scale`) is corrected on the tele window first
+    when the tiles correlate (median ≥ ``coarse_min_zncc``) and the scale moves the box's
+    edges by more than ``coarse_max_scale_drift_px`` against its centre. An uncorrected scale
+    decorrelates a large box although every part of it matches, and then the whole-box
+    comparison of two peaks means nothing: random-1013's ×4.2 periscope (scale 3.7 %) had
+    its box at 2.4 m correlate 0.55 (tiles 0.80) and the chessboard's alias one period away
+    win over the true disparity; corrected, the true peak wins 0.96 to 0.83, and at 3.6-4 m
+    the box correlates 0.95 instead of 0.22-0.30. If the corrected pair gives no usable peak
+    the uncorrected one is tried too.
+    """
+    assert boxes, "no coarse box"
+    b0 = boxes[0]
+    tz, s = float("nan"), float("nan")
+    if center is not None:
+        p0 = coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
+        if np.isfinite(p0.d):
+            s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
+    drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
+    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+        rt_s = rescale_tele(rt, s, center)
+        cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg)
+        if not why:
+            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
+        why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
+    if not why:
+        return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
+    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+        why = why_s
+    elif np.isfinite(tz) and tz < cfg.coarse_min_zncc and "does not correlate" in why:
+        why += (f"; nor do its parts (median tile ZNCC {tz:.2f}): the tele sees it too "
+                "blurred or not at all — focus on the object or move closer")
+    return CoarseChoice(cbox, cp, pc, why, rt, tile_zncc=tz)
+
+
+__all__ = ["CoarseChoice", "coarse_peak", "coarse_verdict"]
