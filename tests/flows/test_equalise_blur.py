@@ -1,4 +1,4 @@
-"""Blur equalisation in the ROI (flows/coarse.py): the blur it adds is the pair's blur
+"""Blur equalisation in the ROI (flows/blur_equalise.py): the blur it adds is the pair's blur
 difference, not a penalty for misalignment.
 
 A periscope module (random-1000) has its rectified rows 4 px off (heating, factory error) and a
@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from phonestereo.flows.coarse import equalise_blur
+from phonestereo.flows.blur_equalise import equalise_blur
 
 
 def _pair(blur_right: float, scale: float, d: float, e: float) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,8 @@
 """The coarse blocks before sub-pixel matching in an ROI (thesis §4.1.3, Fig. 4-2).
 
-A whole-box correlation (cv2.matchTemplate) gives the coarse disparity and its ambiguity, and
-blur equalisation evens out the two cameras' defocus before the windows are fitted.
+A whole-box correlation (cv2.matchTemplate) gives the coarse disparity and its ambiguity; blur
+equalisation (:mod:`~phonestereo.flows.blur_equalise`) then evens out the two cameras'
+defocus before the windows are fitted.
 """
 
 from __future__ import annotations
@@ -152,13 +153,13 @@ def _tile_scores(
         win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32)
         s = cv2.matchTemplate(win, tpl, cv2.TM_CCOEFF_NORMED)
         ky, kx = (int(v) for v in np.unravel_index(int(np.argmax(s)), s.shape))
-        fx = kx + _vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
-        fy = ky + _vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
+        fx = kx + parabola_vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
+        fy = ky + parabola_vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
         out[:, i] = (float(s[ky, kx]), tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
     return out[0], out[1], out[2], out[3], out[4]
 
 
-def _vertex(v: Any, k: int) -> float:
+def parabola_vertex(v: Any, k: int) -> float:
     """Sub-pixel offset of a parabola's vertex through three samples (0 at an edge)."""
     if k == 0 or len(v) < 3:
         return 0.0
@@ -285,144 +286,12 @@ def peak_contrast(
     return PeakContrast(t, n, float(np.median(z1[ok])), float(np.median(z2[ok])), slope)
 
 
-def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
-    """Sub-pixel offset (dx, dy) of ``tpl`` in ``search`` relative to the centred position
-    (``search`` is ``tpl`` plus r px on every side): the ZNCC peak (cv2.matchTemplate) refined
-    by a parabola per axis; |dx|, |dy| ≤ r."""
-    score = cv2.matchTemplate(search, tpl, cv2.TM_CCOEFF_NORMED)
-    r = (score.shape[0] - 1) // 2
-    i, j = (int(v) for v in np.unravel_index(int(np.argmax(score)), score.shape))
-
-    def vertex(c: Any, k: int) -> float:
-        if 0 < k < len(c) - 1:
-            den = c[k - 1] - 2 * c[k] + c[k + 1]
-            if den < 0:
-                return float(np.clip(0.5 * (c[k - 1] - c[k + 1]) / den, -0.5, 0.5))
-        return 0.0
-
-    return j - r + vertex(score[i, :], j), i - r + vertex(score[:, j], i)
-
-
-#: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.
-_TILE = 40
-#: Each tile's alignment search, ± px (the coarse disparity and row offset are whole pixels, the
-#: scale mismatch adds up to ~3 px at a wide box's ends).
-_ALIGN = 3
-
-
-def _aligned_tiles(
-    a: Any, b: Any, rect: tuple[int, int, int, int], shift: tuple[int, int], m: int
-) -> list[tuple[Any, Any]]:
-    """Tile pairs of the compared region, each right tile aligned to its left tile to sub-pixel.
-
-    ``rect`` (x0, y0, x1, y1) is the left region, ``shift`` (xi, yi) the whole-pixel offset of
-    the right one (right = left − shift). Each textured tile, with an ``m``-px border for the
-    blur candidates, is aligned on its own (:func:`_residual_shift`, ±``_ALIGN`` px, then a
-    Lanczos-4 sub-pixel shift as the rectification resamples): the tele's focus-dependent scale
-    (1-2 % on a periscope) moves a whole box's ends by pixels, and a misaligned pair correlates
-    better the more it is blurred.
-    """
-    x0, y0, x1, y1 = rect
-    xi, yi = shift
-    r, n = _ALIGN, _TILE + 2 * m
-    pad = m + r
-    out = []
-    for ty in range(y0, y1 - _TILE + 1, _TILE):
-        for tx in range(x0, x1 - _TILE + 1, _TILE):
-            ly, lx, ry, rx = ty - m, tx - m, ty - yi - pad, tx - xi - pad
-            if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
-                    ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):
-                continue
-            ta = np.ascontiguousarray(a[ly : ly + n, lx : lx + n])
-            if float(ta[m:-m, m:-m].std()) < 1.0:  # flat: says nothing about blur
-                continue
-            tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
-            dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
-            # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
-            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
-            tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
-                                borderMode=cv2.BORDER_REFLECT)
-            out.append((ta, tb))
-    return out
-
-
-def equalise_blur(
-    left: Any,
-    right: Any,
-    box: tuple[int, int, int, int],
-    d0: float,
-    e0: float = 0.0,
-    sigmas: tuple[float, ...] = (0.0, 0.4, 0.7, 1.0, 1.4, 1.8, 2.4, 3.0),
-) -> tuple[Any, Any, float, float]:
-    """Blur the sharper image of the pair so both have the same blur: (left, right, σ_l, σ_r).
-
-    Defocus differs between the cameras away from the focus distance (f/1.8 wide vs f/2.8
-    tele), and a blur mismatch makes every window misfit. The Gaussian σ (added to one image)
-    that maximises the box's ZNCC is chosen; a symmetric blur does not move the correlation
-    peak, so d is unbiased.
-
-    The ZNCC is pooled over tiles of the box, each tile pair *aligned* first
-    (:func:`_aligned_tiles`: the coarse disparity ``d0`` and row offset ``e0``, then each tile's
-    own sub-pixel offset). A misaligned pair correlates better the more both are blurred: with
-    the whole box compared at ``d0`` alone, a calibration 4 px off across the baseline and a
-    tele 1.8 % smaller than calibrated (a periscope's heating, factory error and focus
-    breathing) chose σ = 2.4-3 px on a wide image as sharp as the tele, and that blur let the
-    windows slide along the chart's edges: ±0.7 px per-match errors against σ_d 0.07 px
-    (random-1000, verification chart at 1.2-2.8 m).
-    """
-    x, y, w, h = box
-    xi, yi = round(d0), round(e0)
-    H, W = right.shape[:2]
-    x0, x1 = max(x, xi), min(x + w, W + xi)
-    y0, y1 = max(y, yi), min(y + h, H + yi)
-    if x1 - x0 < 16 or y1 - y0 < 16:
-        return left, right, 0.0, 0.0
-    a = np.asarray(left, np.float32)
-    b = np.asarray(right, np.float32)
-    m = int(np.ceil(3 * max(sigmas))) + 1  # blur border: candidates see real pixels only
-    pairs = _aligned_tiles(a, b, (x0, y0, x1, y1), (xi, yi), m)
-    if not pairs:
-        return left, right, 0.0, 0.0
-
-    def pooled(sl: float, sr: float) -> float:
-        # ZNCC pooled over the tiles (each tile's mean removed): Σpq / √(Σp²·Σq²).
-        num = sp = sq = 0.0
-        for ta, tb in pairs:
-            if sl > 0:
-                ta = cv2.GaussianBlur(ta, (0, 0), sl)
-            if sr > 0:
-                tb = cv2.GaussianBlur(tb, (0, 0), sr)
-            pa, pb = ta[m:-m, m:-m], tb[m:-m, m:-m]
-            pa, pb = pa - pa.mean(), pb - pb.mean()
-            num += float((pa * pb).sum())
-            sp += float((pa * pa).sum())
-            sq += float((pb * pb).sum())
-        return num / np.sqrt(sp * sq + 1e-12)
-
-    best = (pooled(0.0, 0.0), 0.0, 0.0)
-    for s in sigmas[1:]:
-        best = max(best, (pooled(s, 0.0), s, 0.0), (pooled(0.0, s), 0.0, s))
-    if best[2] > 0:
-        # The tele is the sharper one: leave the pair as it is here. The matcher equalises
-        # that case itself (features/blur.py), with the blurred image's noise computed from
-        # the kernel; blurring the right image here, with the noise then re-estimated from
-        # the blurred image (read low), collapsed its sub-pixel stage (841 → 104 survivors
-        # on a chart at 2 m).
-        best = (best[0], 0.0, 0.0)
-    _, s_l, s_r = best
-    if s_l > 0:
-        a = cv2.GaussianBlur(a, (0, 0), s_l)
-    if s_r > 0:
-        b = cv2.GaussianBlur(b, (0, 0), s_r)
-    return a, b, s_l, s_r
-
-
 __all__ = [
     "CoarsePeak",
     "PeakContrast",
     "coarse_disparity",
     "coarse_search",
-    "equalise_blur",
+    "parabola_vertex",
     "peak_contrast",
     "rescale_tele",
     "tile_wt_scale",

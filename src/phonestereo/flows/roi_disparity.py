@@ -23,7 +23,7 @@ from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.band_gate import band_reason, band_split
-from phonestereo.flows.coarse import equalise_blur
+from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline

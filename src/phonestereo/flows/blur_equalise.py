@@ -1,0 +1,140 @@
+"""Blur equalisation in an ROI (thesis §4.1.3, Fig. 4-2): after the coarse step, the sharper
+image of the pair is blurred to the other's blur before the sub-pixel windows are fitted.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import cv2
+import numpy as np
+
+from phonestereo.flows.coarse import parabola_vertex
+
+
+def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
+    """Sub-pixel offset (dx, dy) of ``tpl`` in ``search`` relative to the centred position
+    (``search`` is ``tpl`` plus r px on every side): the ZNCC peak (cv2.matchTemplate) refined
+    by a parabola per axis; |dx|, |dy| ≤ r."""
+    score = cv2.matchTemplate(search, tpl, cv2.TM_CCOEFF_NORMED)
+    r = (score.shape[0] - 1) // 2
+    i, j = (int(v) for v in np.unravel_index(int(np.argmax(score)), score.shape))
+    return (j - r + parabola_vertex(score[i, max(j - 1, 0) : j + 2], j),
+            i - r + parabola_vertex(score[max(i - 1, 0) : i + 2, j], i))
+
+
+#: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.
+_TILE = 40
+#: Each tile's alignment search, ± px (the coarse disparity and row offset are whole pixels, the
+#: scale mismatch adds up to ~3 px at a wide box's ends).
+_ALIGN = 3
+
+
+def _aligned_tiles(
+    a: Any, b: Any, rect: tuple[int, int, int, int], shift: tuple[int, int], m: int
+) -> list[tuple[Any, Any]]:
+    """Tile pairs of the compared region, each right tile aligned to its left tile to sub-pixel.
+
+    ``rect`` (x0, y0, x1, y1) is the left region, ``shift`` (xi, yi) the whole-pixel offset of
+    the right one (right = left − shift). Each textured tile, with an ``m``-px border for the
+    blur candidates, is aligned on its own (:func:`_residual_shift`, ±``_ALIGN`` px, then a
+    Lanczos-4 sub-pixel shift as the rectification resamples): the tele's focus-dependent scale
+    (1-2 % on a periscope) moves a whole box's ends by pixels, and a misaligned pair correlates
+    better the more it is blurred.
+    """
+    x0, y0, x1, y1 = rect
+    xi, yi = shift
+    r, n = _ALIGN, _TILE + 2 * m
+    pad = m + r
+    out = []
+    for ty in range(y0, y1 - _TILE + 1, _TILE):
+        for tx in range(x0, x1 - _TILE + 1, _TILE):
+            ly, lx, ry, rx = ty - m, tx - m, ty - yi - pad, tx - xi - pad
+            if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
+                    ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):
+                continue
+            ta = np.ascontiguousarray(a[ly : ly + n, lx : lx + n])
+            if float(ta[m:-m, m:-m].std()) < 1.0:  # flat: says nothing about blur
+                continue
+            tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
+            dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
+            # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
+            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
+            tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REFLECT)
+            out.append((ta, tb))
+    return out
+
+
+def equalise_blur(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    d0: float,
+    e0: float = 0.0,
+    sigmas: tuple[float, ...] = (0.0, 0.4, 0.7, 1.0, 1.4, 1.8, 2.4, 3.0),
+) -> tuple[Any, Any, float, float]:
+    """Blur the sharper image of the pair so both have the same blur: (left, right, σ_l, σ_r).
+
+    Defocus differs between the cameras away from the focus distance (f/1.8 wide vs f/2.8
+    tele), and a blur mismatch makes every window misfit. The Gaussian σ (added to one image)
+    that maximises the box's ZNCC is chosen; a symmetric blur does not move the correlation
+    peak, so d is unbiased.
+
+    The ZNCC is pooled over tiles of the box, each tile pair *aligned* first
+    (:func:`_aligned_tiles`: the coarse disparity ``d0`` and row offset ``e0``, then each tile's
+    own sub-pixel offset). A misaligned pair correlates better the more both are blurred: with
+    the whole box compared at ``d0`` alone, a calibration 4 px off across the baseline and a
+    tele 1.8 % smaller than calibrated (a periscope's heating, factory error and focus
+    breathing) chose σ = 2.4-3 px on a wide image as sharp as the tele, and that blur let the
+    windows slide along the chart's edges: ±0.7 px per-match errors against σ_d 0.07 px
+    (random-1000, verification chart at 1.2-2.8 m).
+    """
+    x, y, w, h = box
+    xi, yi = round(d0), round(e0)
+    H, W = right.shape[:2]
+    x0, x1 = max(x, xi), min(x + w, W + xi)
+    y0, y1 = max(y, yi), min(y + h, H + yi)
+    if x1 - x0 < 16 or y1 - y0 < 16:
+        return left, right, 0.0, 0.0
+    a = np.asarray(left, np.float32)
+    b = np.asarray(right, np.float32)
+    m = int(np.ceil(3 * max(sigmas))) + 1  # blur border: candidates see real pixels only
+    pairs = _aligned_tiles(a, b, (x0, y0, x1, y1), (xi, yi), m)
+    if not pairs:
+        return left, right, 0.0, 0.0
+
+    def pooled(sl: float, sr: float) -> float:
+        # ZNCC pooled over the tiles (each tile's mean removed): Σpq / √(Σp²·Σq²).
+        num = sp = sq = 0.0
+        for ta, tb in pairs:
+            if sl > 0:
+                ta = cv2.GaussianBlur(ta, (0, 0), sl)
+            if sr > 0:
+                tb = cv2.GaussianBlur(tb, (0, 0), sr)
+            pa, pb = ta[m:-m, m:-m], tb[m:-m, m:-m]
+            pa, pb = pa - pa.mean(), pb - pb.mean()
+            num += float((pa * pb).sum())
+            sp += float((pa * pa).sum())
+            sq += float((pb * pb).sum())
+        return num / np.sqrt(sp * sq + 1e-12)
+
+    best = (pooled(0.0, 0.0), 0.0, 0.0)
+    for s in sigmas[1:]:
+        best = max(best, (pooled(s, 0.0), s, 0.0), (pooled(0.0, s), 0.0, s))
+    if best[2] > 0:
+        # The tele is the sharper one: leave the pair as it is here. The matcher equalises
+        # that case itself (features/blur.py), with the blurred image's noise computed from
+        # the kernel; blurring the right image here, with the noise then re-estimated from
+        # the blurred image (read low), collapsed its sub-pixel stage (841 → 104 survivors
+        # on a chart at 2 m).
+        best = (best[0], 0.0, 0.0)
+    _, s_l, s_r = best
+    if s_l > 0:
+        a = cv2.GaussianBlur(a, (0, 0), s_l)
+    if s_r > 0:
+        b = cv2.GaussianBlur(b, (0, 0), s_r)
+    return a, b, s_l, s_r
+
+
+__all__ = ["equalise_blur"]
