@@ -104,19 +104,22 @@ def equalise_blur(
     if not pairs:
         return left, right, 0.0, 0.0
 
+    # The tiles side by side in one strip per image (each keeps its own m-px border), so that
+    # each candidate is one cv2.GaussianBlur per image instead of one per tile.
+    n = pairs[0][0].shape[0]
+    strip_a = np.hstack([ta for ta, _ in pairs])
+    strip_b = np.hstack([tb for _, tb in pairs])
+
+    def inner(strip: Any) -> Any:
+        t = strip.reshape(n, len(pairs), n)[m:-m, :, m:-m]  # (rows, tile, cols)
+        return t - t.mean(axis=(0, 2), keepdims=True)
+
     def pooled(sl: float, sr: float) -> float:
         # ZNCC pooled over the tiles (each tile's mean removed): Σpq / √(Σp²·Σq²).
-        num = sp = sq = 0.0
-        for ta, tb in pairs:
-            if sl > 0:
-                ta = cv2.GaussianBlur(ta, (0, 0), sl)
-            if sr > 0:
-                tb = cv2.GaussianBlur(tb, (0, 0), sr)
-            pa, pb = ta[m:-m, m:-m], tb[m:-m, m:-m]
-            pa, pb = pa - pa.mean(), pb - pb.mean()
-            num += float((pa * pb).sum())
-            sp += float((pa * pa).sum())
-            sq += float((pb * pb).sum())
+        pa = inner(cv2.GaussianBlur(strip_a, (0, 0), sl) if sl > 0 else strip_a)
+        pb = inner(cv2.GaussianBlur(strip_b, (0, 0), sr) if sr > 0 else strip_b)
+        num = float(np.einsum("ijk,ijk->", pa, pb))
+        sp, sq = float(np.einsum("ijk,ijk->", pa, pa)), float(np.einsum("ijk,ijk->", pb, pb))
         return num / np.sqrt(sp * sq + 1e-12)
 
     best = (pooled(0.0, 0.0), 0.0, 0.0)
