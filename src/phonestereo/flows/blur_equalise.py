@@ -9,18 +9,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from phonestereo.flows.coarse import parabola_vertex
+from phonestereo.flows.coarse import template_peak
 
 
 def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
     """Sub-pixel offset (dx, dy) of ``tpl`` in ``search`` relative to the centred position
-    (``search`` is ``tpl`` plus r px on every side): the ZNCC peak (cv2.matchTemplate) refined
-    by a parabola per axis; |dx|, |dy| ≤ r."""
-    score = cv2.matchTemplate(search, tpl, cv2.TM_CCOEFF_NORMED)
-    r = (score.shape[0] - 1) // 2
-    i, j = (int(v) for v in np.unravel_index(int(np.argmax(score)), score.shape))
-    return (j - r + parabola_vertex(score[i, max(j - 1, 0) : j + 2], j),
-            i - r + parabola_vertex(score[max(i - 1, 0) : i + 2, j], i))
+    (``search`` is ``tpl`` plus r px on every side), |dx|, |dy| ≤ r."""
+    r = (search.shape[0] - tpl.shape[0]) // 2
+    _, fx, fy = template_peak(search, tpl)
+    return fx - r, fy - r
 
 
 #: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.

@@ -151,12 +151,19 @@ def _tile_scores(
         if sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H or tpl.std() < 1e-3:
             continue
         win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32)
-        s = cv2.matchTemplate(win, tpl, cv2.TM_CCOEFF_NORMED)
-        ky, kx = (int(v) for v in np.unravel_index(int(np.argmax(s)), s.shape))
-        fx = kx + parabola_vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
-        fy = ky + parabola_vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
-        out[:, i] = (float(s[ky, kx]), tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
+        z, fx, fy = template_peak(win, tpl)
+        out[:, i] = (z, tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
     return out[0], out[1], out[2], out[3], out[4]
+
+
+def template_peak(window: Any, template: Any) -> tuple[float, float, float]:
+    """Best match of ``template`` inside ``window`` (cv2.matchTemplate, ZNCC): (score, x, y),
+    the template's top-left in the window refined by a parabola per axis."""
+    s = cv2.matchTemplate(window, template, cv2.TM_CCOEFF_NORMED)
+    ky, kx = (int(v) for v in np.unravel_index(int(np.argmax(s)), s.shape))
+    fx = kx + parabola_vertex(s[ky, max(kx - 1, 0) : kx + 2], kx)
+    fy = ky + parabola_vertex(s[max(ky - 1, 0) : ky + 2, kx], ky)
+    return float(s[ky, kx]), fx, fy
 
 
 def parabola_vertex(v: Any, k: int) -> float:
@@ -294,5 +301,6 @@ __all__ = [
     "parabola_vertex",
     "peak_contrast",
     "rescale_tele",
+    "template_peak",
     "tile_wt_scale",
 ]

@@ -143,7 +143,9 @@ def coarse_peak(
         if np.isfinite(p0.d):
             s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
-    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+    prescale = tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px
+    why_s = ""
+    if prescale and center is not None:
         rt_s = rescale_tele(rt, s, center)
         cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg)
         if not why:
@@ -152,7 +154,7 @@ def coarse_peak(
     cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
-    if center is not None and tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px:
+    if why_s:
         why = why_s
     elif np.isfinite(tz) and tz < cfg.coarse_min_zncc and "does not correlate" in why:
         why += (f"; nor do its parts (median tile ZNCC {tz:.2f}): the tele sees it too "

@@ -364,8 +364,9 @@ def measure_roi(
     if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
         split = band_split(res.xy + shift, res.d, res.e, m2, fit, plane.predict, cfg)
         counts.update(split)
-        if band_reason(split, cfg):
-            return _fail(band_reason(split, cfg), grid, counts)
+        why = band_reason(split, cfg)
+        if why:
+            return _fail(why, grid, counts)
     resid = d - plane.predict(xy)[0]
     good = np.abs(resid) <= max(4 * plane.scatter_px, 0.2)
     counts["plane"] = int(good.sum())
