@@ -153,8 +153,7 @@ def check_pair(
 
 def antialias_sigma(shrink: float) -> float:
     """The Gaussian σ (raw px) :func:`remap_image` blurs with before shrinking by ``shrink``
-    (its rule, repeated for :meth:`Rectification.remap`'s source box, which must cover the
-    kernel; tests/rectification/test_rect_source_box.py checks that the two agree)."""
+    (also sizes :meth:`Rectification.remap`'s source box, which must cover the kernel)."""
     return 0.5 * (shrink - 1.0) if shrink > 1.0 + 1e-6 else 0.0
 
 
@@ -185,8 +184,8 @@ def remap_image(
     if interpolation not in _INTERP:
         raise InputError(f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}")
     src = image
-    if antialias and shrink > 1.0 + 1e-6:
-        sigma = 0.5 * (shrink - 1.0)
+    sigma = antialias_sigma(shrink) if antialias else 0.0
+    if sigma > 0:
         src = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=sigma)
     out = cv2.remap(
         src, map_x, map_y, _INTERP[interpolation], borderMode=cv2.BORDER_CONSTANT, borderValue=0
