@@ -53,6 +53,13 @@ def test_learn_then_depth_on_the_cli(bench_set: Path, tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     res = json.loads(r.stdout)["results"]
     assert len(res) == 4 and all(x["ok"] and x["sigma_m"] > 0 for x in res)
+    # The factory calibration carries the wide's focal length (4.2 mm) and focus (0.6 m); the
+    # captures report the wide's focus (1.5 m, with 0.3 D of reporting noise: 0.126 % of
+    # scale per σ for 4.2 mm): the depth is shortened by the thin-lens breathing, 0.42 % at
+    # 1.5 m, each capture within 4σ of the reporting noise.
+    for x in res:
+        b = x["stages"]["wide_breathing"]
+        assert b["focus"] == "reported" and abs(b["scale"] - 0.99579) < 0.005, b
 
 
 def test_depth_without_a_store_or_with_a_cold_capture_says_why(

@@ -13,7 +13,12 @@ Blocks, in order, each named as the thesis names it (§4.1.3) and each recorded 
    matching bound (the plane fit over Cramér–Rao-weighted matches), the W-T scale's σ and the
    correction's σ with its systematic and extrapolation parts
    (:mod:`~phonestereo.learning.extent`); a depth whose σ/Z exceeds
-   ``FlowConfig.max_relative_sigma`` is gated ``extrapolation`` with the reason.
+   ``FlowConfig.max_relative_sigma`` is gated ``extrapolation`` with the reason;
+6. **wide breathing** — the depth scaled by the wide's focal length at its working focus (the
+   reported focus position, else the measured depth) over the calibrated one (§3.5,
+   :mod:`~phonestereo.fixes.breathing`), when the calibration gives the wide's physical focal
+   length and focus distance: the learned correction cannot see this scale (the IPD ruler
+   reads in the same pixels).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from phonestereo.fixes.breathing import correct_depth
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
@@ -194,6 +200,16 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         sigma_wt = float(m.wt.sigma_scale * abs(x_t - m.wt.center_px[0]))
     sigma_d = float(np.sqrt(sd_grid[k] ** 2 + sigma_wt**2 + corr_s[k] ** 2))
     sigma_z = depth * sigma_d / max(float(d_fix[k]), 1e-9)
+    cond = inputs.calibration.conditions
+    if config.wide_breathing and cond.wide_focal_length_mm and cond.focus_distance_m:
+        scale = correct_depth(depth, cond.wide_focal_length_mm, cond.focus_distance_m,
+                              entry.focus_position) / depth
+        depth, sigma_z, z_raw = depth * scale, sigma_z * scale, z_raw * scale
+        stages["wide_breathing"] = {
+            "scale": round(scale, 6), "focal_length_mm": cond.wide_focal_length_mm,
+            "calibration_focus_m": cond.focus_distance_m,
+            "focus": "reported" if entry.focus_position is not None else "measured depth",
+        }
     stages["sigma_px"] = {
         "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
         "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),

@@ -31,6 +31,7 @@ FIXES = (
     "canonical",
     "orientation_buckets",
     "learned_correction",
+    "wide_breathing",
 )
 
 
@@ -46,12 +47,15 @@ class FlowConfig:
         when 92 % of the warm-up drift has happened. A phone that heats more slowly needs
         about 2.6 × its own τ (set it with ``--config``; docs/flow-config.md).
     heating_gate, focus_calibration, wt_scale, canonical, orientation_buckets,
-    learned_correction : bool
+    learned_correction, wide_breathing : bool
         The fixes (all on by default): the warm-up gate (§3.1), the refocus-stack focus
         calibration (Fig. 4-1, §3.5.3), the W-T scale (§3.5.1), canonical rectification
         (§3.3; off = ``tele-to-wide``), orientation-keyed fixes (§3.4), the learned
-        correction from faces (§3.6). The focus calibration is off by default: on handheld
-        stacks the same-camera scale between attempts is dominated by the hand's motion, and
+        correction from faces (§3.6), the wide's focus breathing between calibration and use
+        (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the calibration gives the
+        wide's physical focal length and its focus distance, else a no-op). The focus
+        calibration is off by default: on handheld stacks the same-camera scale between
+        attempts is dominated by the hand's motion, and
         on the thesis bench it made the full flow worse on all three sets measured (median
         0.44/0.61/0.74 % without it, 0.51/0.86/0.91 % with it); it is meant for tripod stacks.
     lookup : str
@@ -73,6 +77,9 @@ class FlowConfig:
         reports one; such captures then skip the warm-up gate (their drift is corrected, not
         waited out). Without temperatures, a significant drift of the learned offsets over the
         learning captures' time puts the drift still to come into σ (τ = ``warmup_s`` / 2.6).
+    face_wt_keypoints : int
+        Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele
+        shares with the wide (not the faces' box): the scale's lever is the view's height.
     roi : RoiConfig
         The ROI measurement's parameters. Its rectification mode and W-T switch are not in
         it: they are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
@@ -91,6 +98,8 @@ class FlowConfig:
     focal_rel_sigma: float = FOCAL_REL_SIGMA
     max_relative_sigma: float = 0.05
     heating_by_temperature: bool = True
+    wide_breathing: bool = True
+    face_wt_keypoints: int = 1500
     roi: RoiConfig = field(default_factory=RoiConfig)
 
     def __post_init__(self) -> None:
@@ -100,6 +109,8 @@ class FlowConfig:
             raise InputError(f"warmup_s must be >= 0 seconds, got {self.warmup_s}")
         if not isinstance(self.roi, RoiConfig):
             raise InputError(f"roi must be a RoiConfig, got {type(self.roi).__name__}")
+        if int(self.face_wt_keypoints) < 50:
+            raise InputError(f"face_wt_keypoints must be >= 50, got {self.face_wt_keypoints}")
         if not 0 <= int(self.field_max_degree) <= 3 or self.min_observations < 0:
             raise InputError("field_max_degree must be 0..3 and min_observations >= 0")
 
@@ -141,6 +152,7 @@ APPLY_ONLY = (
     "field_max_degree",
     "focal_rel_sigma",
     "max_relative_sigma",
+    "wide_breathing",
 )
 
 ALL_BUCKETS = "all"

@@ -4,7 +4,7 @@ Blocks per face capture, in order: **gates** (heated, fixed focus, orientation;
 :mod:`~phonestereo.flows.gates`) → **focus calibration** of its refocus stack (Fig. 4-1,
 :mod:`~phonestereo.flows.focus_stack`) → **landmarks** in both cameras → **depth from IPD**
 (eq. 11) → **landmark disparity** (:func:`~phonestereo.learning.learn.learn_capture`) →
-**W-T scale** over the face chart's texture (§3.5.1, the same block as the application phase,
+**W-T scale** over everything the tele sees (§3.5.1, the same block as the application phase,
 so learned and applied disparities share one convention) → **observations into the fix
 store**, one transaction per capture, under the store's context for this calibration and
 flow configuration (:mod:`~phonestereo.learning.store_contexts`) and keyed by the capture
@@ -22,8 +22,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
-
-import numpy as np
 
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend
@@ -145,25 +143,20 @@ class LearningResult:
         }
 
 
-def _faces_box(
-    ref: Rectification, obs: tuple[Observation, ...], size: tuple[int, int]
-) -> tuple[int, int, int, int] | None:
-    """The raw-wide box around the learned faces, padded by a third of its size (≥ 80 px),
-    inside the tele's view."""
-    if not obs:
-        return None
-    raw = ref.unrectify_wide(np.array([[o.x_px, o.y_px] for o in obs]))
-    raw = raw[np.isfinite(raw).all(axis=1)]
-    if len(raw) == 0:
-        return None
-    lo, hi = raw.min(axis=0), raw.max(axis=0)
-    pad = np.maximum(80.0, (hi - lo) / 3)
+def _wt_box(ref: Rectification, size: tuple[int, int]) -> tuple[int, int, int, int] | None:
+    """The raw-wide box of the face captures' W-T scale fit: everything the tele sees.
+
+    The scale is read from e across the disparity axis, so its error is the matches' e error
+    over their lever (the box's height in tele pixels). The faces' own box (a row of faces, a
+    small lever) scattered the scale by 0.15 % on a ×3.5 periscope (random-1000), ±0.5 px in
+    single face observations; the tele's whole view, 0.04 % (docs/module-random.md).
+    """
     tx, ty, tw, th = tele_view_box(ref)
-    lo = np.maximum(lo - pad, [tx, ty])
-    hi = np.minimum(np.minimum(hi + pad, np.array(size) - 1), [tx + tw, ty + th])
-    if np.any(hi - lo < 32):
+    x0, y0 = max(int(tx), 0), max(int(ty), 0)
+    x1, y1 = min(int(tx + tw), size[0] - 1), min(int(ty + th), size[1] - 1)
+    if x1 - x0 < 32 or y1 - y0 < 32:
         return None
-    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
+    return x0, y0, x1 - x0, y1 - y0
 
 
 def learn_face_capture(
@@ -211,11 +204,12 @@ def learn_face_capture(
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
                                time.perf_counter() - t0)
     if config.wt_scale:
-        box = _faces_box(rect, obs, rig.wide.size)
+        box = _wt_box(rect, rig.wide.size)
         wt = None
-        why = "the faces are not inside the tele's view"
+        why = "the tele's view is not inside the wide image"
         if box is not None:
-            roi_cfg = replace(config.roi, expand=1.0, coarse_expand=1.0)
+            match = replace(config.roi.match, max_keypoints=int(config.face_wt_keypoints))
+            roi_cfg = replace(config.roi, expand=1.0, coarse_expand=1.0, match=match)
             m = measure_roi(rig, imgs[0], imgs[1], box, roi_cfg, rect, mode=config.mode)
             wt = m.wt
             why = m.reason or (wt.reason if wt is not None else "")

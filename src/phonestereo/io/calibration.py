@@ -63,12 +63,18 @@ class CalibrationConditions:
         Orientation label, e.g. "landscape".
     note : str
         Free text.
+    wide_focal_length_mm : float or None
+        The wide lens's physical focal length in millimetres (0 < f < 100), as the phone
+        reports it (Camera2 ``LENS_INFO_AVAILABLE_FOCAL_LENGTHS``, EXIF ``FocalLength``). With
+        ``focus_distance_m`` it gives the wide's focus breathing between calibration and use
+        (:mod:`phonestereo.fixes.breathing`); None when unknown.
     """
 
     focus_distance_m: float | None = None
     temperature_c: float | None = None
     orientation: str | None = None
     note: str = ""
+    wide_focal_length_mm: float | None = None
 
     def __post_init__(self) -> None:
         if self.focus_distance_m is not None:
@@ -85,6 +91,14 @@ class CalibrationConditions:
             raise InputError(f"orientation must be a label string, got {self.orientation!r}")
         if not isinstance(self.note, str):
             raise InputError(f"note must be a string, got {self.note!r}")
+        if self.wide_focal_length_mm is not None:
+            v = float(self.wide_focal_length_mm)
+            if not (np.isfinite(v) and 0 < v < 100):
+                raise InputError(
+                    f"wide_focal_length_mm must be the lens's focal length in millimetres "
+                    f"(0–100), got {v}"
+                )
+            object.__setattr__(self, "wide_focal_length_mm", v)
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +184,8 @@ def calibration_to_dict(cal: Calibration) -> dict[str, Any]:
             "temperature_c": c.temperature_c,
             "orientation": c.orientation,
             "note": c.note,
+            **({} if c.wide_focal_length_mm is None
+               else {"wide_focal_length_mm": c.wide_focal_length_mm}),
         },
         "rms_px": cal.rms_px,
     }
@@ -265,7 +281,8 @@ def calibration_from_dict(data: Any, source: str = "calibration.json") -> Calibr
         T = Transform(R, t)
     with _field(source, "T_tele_wide.t"):
         rig = Rig(wide, tele, T)
-    cond_keys = ("focus_distance_m", "temperature_c", "orientation", "note")
+    cond_keys = ("focus_distance_m", "temperature_c", "orientation", "note",
+                 "wide_focal_length_mm")
     c_d = _check_keys(d.get("conditions", {}), cond_keys, source, "conditions.")
     conditions = CalibrationConditions()
     for key in cond_keys:

@@ -97,6 +97,7 @@ def factory_calibration(spec: ModuleSpec, rng: np.random.Generator) -> Calibrati
         ),
         orientation=spec.calibration.orientation,
         note=f"factory calibration of virtual module '{spec.name}' (sim)",
+        wide_focal_length_mm=spec.wide.focal_length_mm,  # what the phone's metadata reports
     )
     rig = Rig(wide, tele, Transform(R, -R @ center))
     return Calibration(
