@@ -5,8 +5,10 @@ again → W-T scale in the ROI": the pair is rectified (canonical, §3.3) only i
 the expanded ROI (no full-frame remap), sparse sub-pixel matches are found there
 (:func:`~phonestereo.features.matching.match_rectified`), the majority disparity of the ROI's
 own matches selects the surface the user pointed at, the expanded ROI's matches on that
-surface are kept, and a robust plane d = a + b·x + c·y (exact for a planar surface: 1/Z is
-affine in the image) gives the disparity over the ROI with its σ. Every coordinate returned is
+surface are kept, and a robust plane d = a + b·x + c·y (exact for a planar surface in a perfect
+rectification: 1/Z is affine in the image; with enough matches plus the quadratic terms that a
+factory calibration's distortion error leaves, :func:`fit_plane`) gives the disparity over the
+ROI with its σ. Every coordinate returned is
 in the *reference* rectified frame (:func:`reference_rectification`: canonical, shared field
 of view), the frame the fix store's observations live in.
 """
@@ -17,7 +19,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
@@ -26,6 +27,7 @@ from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
@@ -38,25 +40,6 @@ def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
     """The reference rectified frame of a calibration: ``mode``, shared field of view."""
     return Rectification.from_rig(rig, mode)
 
-
-
-@dataclass(frozen=True)
-class PlaneFit:
-    """Robust disparity plane d = a + b·(x − x0) + c·(y − y0) over the kept matches."""
-
-    coef: F64
-    cov: F64
-    x0: float
-    y0: float
-    scatter_px: float
-    n: int
-
-    def predict(self, xy: Any) -> tuple[F64, F64]:
-        """(d, σ_d) at reference-frame points (N, 2)."""
-        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        A = np.column_stack([np.ones(len(p)), p[:, 0] - self.x0, p[:, 1] - self.y0])
-        var = np.einsum("ij,jk,ik->i", A, self.cov, A)
-        return A @ self.coef, np.sqrt(np.clip(var, 0.0, None))
 
 
 @dataclass(frozen=True)
@@ -96,50 +79,6 @@ class RoiMeasurement:
     wt: WTScale | None
     roi_grid: F64
     counts: dict[str, int]
-
-
-def majority(d: Any, *, bin_px: float, tol_px: float, tol_rel: float) -> tuple[float, np.ndarray]:
-    """Majority disparity (thesis §4.1.3): the most populated histogram bin (smoothed over its
-    neighbours), refined to the median of the matches within the band; (value, mask).
-
-    Examples
-    --------
-    >>> v, m = majority([9.9, 10.0, 10.1, 10.05, 3.0, 3.1], bin_px=0.5, tol_px=0.5, tol_rel=0)
-    >>> round(v, 3), m.tolist()
-    (10.025, [True, True, True, True, False, False])
-    """
-    x = np.asarray(d, dtype=np.float64)
-    if x.size == 0:
-        return float("nan"), np.zeros(0, bool)
-    lo = np.floor(x.min() / bin_px) - 1
-    idx = (np.floor(x / bin_px) - lo).astype(np.int64)
-    counts = np.bincount(idx, minlength=int(idx.max()) + 2).astype(np.float64)
-    smooth = np.convolve(counts, [0.5, 1.0, 0.5], mode="same")
-    peak = (int(np.argmax(smooth)) + lo + 0.5) * bin_px
-    tol = max(tol_px, tol_rel * abs(peak))
-    mask = np.abs(x - peak) <= tol
-    value = float(np.median(x[mask]))
-    mask = np.abs(x - value) <= tol
-    return float(np.median(x[mask])), mask
-
-
-def fit_plane(xy: F64, d: F64, sigma: F64) -> PlaneFit:
-    """Robust (soft-L1) weighted plane of d over (x, y); σ from the scatter and Jacobian."""
-    x0, y0 = float(np.mean(xy[:, 0])), float(np.mean(xy[:, 1]))
-    A = np.column_stack([np.ones(len(d)), xy[:, 0] - x0, xy[:, 1] - y0])
-    w = 1.0 / np.clip(sigma, 1e-3, None)
-    Aw, bw = A * w[:, None], d * w
-    p0 = np.linalg.lstsq(Aw, bw, rcond=None)[0]
-    res = least_squares(lambda p: Aw @ p - bw, p0, loss="soft_l1", f_scale=2.0)
-    r = d - A @ res.x
-    rw = r * w
-    inl = np.abs(rw) <= 4.0 * max(1.0, 1.4826 * float(np.median(np.abs(rw))))
-    dof = max(int(inl.sum()) - 3, 1)
-    chi2 = float(np.sum(rw[inl] ** 2)) / dof
-    # σ: Cramér–Rao weights, inflated by the observed scatter when it exceeds them.
-    cov = np.linalg.pinv(Aw[inl].T @ Aw[inl]) * max(chi2, 1.0)
-    scatter = float(1.4826 * np.median(np.abs(r[inl] - np.median(r[inl])))) if inl.any() else 0.0
-    return PlaneFit(np.asarray(res.x), cov, x0, y0, scatter, int(inl.sum()))
 
 
 def _expanded(roi: tuple[int, int, int, int], factor: float, size: tuple[int, int]) -> Any:
@@ -213,40 +152,9 @@ def _match_majority(
     tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
     keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
     m2, sel = majority(res.d[keep], **kw)
-    idx = _follow_plane(res.xy, res.d, res.sigma_d, np.flatnonzero(keep)[sel], tol)
+    idx = follow_plane(res.xy, res.d, res.sigma_d, np.flatnonzero(keep)[sel], tol)
     counts["majority"] = len(idx)
     return res, in_roi, idx, m2, counts
-
-
-def _follow_plane(xy: F64, d: F64, sigma: F64, idx: np.ndarray, tol: float,
-                  rounds: int = 3) -> np.ndarray:
-    """The majority surface's matches along its slant: within ``tol`` of its plane, not of
-    one disparity.
-
-    A band of constant disparity cuts a strip out of a slanted surface (a tilted chart, or a
-    tele whose scale is off: random-1011's 1.7 % focus breathing makes d run 0.012 px/px, 5 px
-    over the box), and where the strip lies moves from capture to capture; the plane then
-    extrapolates its slope over the ROI (−0.27 … +0.19 px at the ROI, 0.14 px SD against a
-    claimed 0.03). Refitting the plane to the selection and reselecting about it, a few
-    times, keeps the whole surface.
-
-    Examples
-    --------
-    >>> x = np.linspace(0, 400, 81)
-    >>> xy, d = np.column_stack([x, np.zeros(81)]), 5 + 0.012 * x   # 4.8 px across
-    >>> start = np.flatnonzero(np.abs(d - 7.4) <= 0.75)              # the constant band
-    >>> len(start), len(_follow_plane(xy, d, np.full(81, 0.05), start, 0.75))
-    (25, 81)
-    """
-    for _ in range(rounds):
-        if len(idx) < 6:
-            break
-        plane = fit_plane(xy[idx], d[idx], sigma[idx])
-        new = np.flatnonzero(np.abs(d - plane.predict(xy)[0]) <= tol)
-        if len(new) < len(idx) or np.array_equal(new, idx):
-            break
-        idx = new
-    return idx
 
 
 def measure_roi(
