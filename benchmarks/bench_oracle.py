@@ -65,7 +65,7 @@ def decompose(set_dir: str, prefixes: tuple[str, ...] = ()) -> list[dict[str, An
             continue
         q = ref.points_wide(qw[inside])
         d_true, _ = ref.disparity(qw[inside], qt[inside])
-        d_raw = raw.plane.predict(q)[0]
+        d_raw, sd_raw = raw.plane.predict(q)
         d_wt = scaled.plane.predict(q)[0]
         z_wt = ref.backproject(q, d_wt)[:, 2]
         need = d_wt * z_wt / z[inside] - d_wt  # Z ∝ 1/d along a ray
@@ -75,6 +75,9 @@ def decompose(set_dir: str, prefixes: tuple[str, ...] = ()) -> list[dict[str, An
             "disparity_px": round(float(np.median(d_wt)), 3),
             "blur_added_px": raw.counts.get("blur_added_x100", 0) / 100,
             "matches": raw.counts.get("plane", 0),
+            "sigma_plane_px": round(float(np.median(sd_raw)), 4),
+            "e_median_px": round(float(np.median(raw.e)), 3),
+            "scatter_px": round(float(raw.plane.scatter_px), 4),
             "wt_scale": None if scaled.wt is None else round(float(scaled.wt.scale), 5),
         })
         rows.append(row)
@@ -92,19 +95,22 @@ def main() -> None:
         print(json.dumps(rows, indent=1))
         return
     print(f"{'capture':8} {'Z m':>6} {'d px':>7} {'matcher px':>10} {'needed px':>9} "
-          f"{'blur':>5} {'n':>4}")
+          f"{'blur':>5} {'n':>4} {'σ_d':>6} {'e':>6}")
     for r in rows:
         if "reason" in r:
             print(f"{r['capture_id']:8} gated: {r['reason'][:90]}")
             continue
         print(f"{r['capture_id']:8} {r['z_true_m']:6.3f} {r['disparity_px']:7.2f} "
               f"{r['matcher_error_px']:+10.3f} {r['needed_correction_px']:+9.3f} "
-              f"{r['blur_added_px']:5.2f} {r['matches']:4d}")
+              f"{r['blur_added_px']:5.2f} {r['matches']:4d} {r['sigma_plane_px']:6.3f} "
+              f"{r['e_median_px']:+6.2f}")
     ok = [r for r in rows if "reason" not in r]
     if len(ok) > 1:
         m = np.array([r["matcher_error_px"] for r in ok])
         n = np.array([r["needed_correction_px"] for r in ok])
-        print(f"matcher error: median {np.median(m):+.3f} px, spread (SD) {m.std(ddof=1):.3f} px;"
+        s = np.array([r["sigma_plane_px"] for r in ok])
+        print(f"matcher error: median {np.median(m):+.3f} px, spread (SD) {m.std(ddof=1):.3f} px"
+              f" against the plane's σ_d (RMS) {np.sqrt(np.mean(s**2)):.3f} px;"
               f" needed correction: SD {n.std(ddof=1):.3f} px over {len(ok)} captures")
 
 

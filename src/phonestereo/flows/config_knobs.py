@@ -33,8 +33,8 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
         ),
         "majority_tol_px": (
             "px",
-            "Band kept about the majority disparity (absolute part).",
-            "0.75 px: keeps a slanted surface's spread.",
+            "Band kept about the majority disparity, then about the surface's plane (absolute).",
+            "0.75 px: the matches' spread; the plane follows a slanted surface.",
         ),
         "majority_tol_rel": (
             "fraction",

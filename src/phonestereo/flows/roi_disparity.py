@@ -5,8 +5,10 @@ again → W-T scale in the ROI": the pair is rectified (canonical, §3.3) only i
 the expanded ROI (no full-frame remap), sparse sub-pixel matches are found there
 (:func:`~phonestereo.features.matching.match_rectified`), the majority disparity of the ROI's
 own matches selects the surface the user pointed at, the expanded ROI's matches on that
-surface are kept, and a robust plane d = a + b·x + c·y (exact for a planar surface: 1/Z is
-affine in the image) gives the disparity over the ROI with its σ. Every coordinate returned is
+surface are kept, and a robust plane d = a + b·x + c·y (exact for a planar surface in a perfect
+rectification: 1/Z is affine in the image; with enough matches plus the quadratic terms that a
+factory calibration's distortion error leaves, :func:`fit_plane`) gives the disparity over the
+ROI with its σ. Every coordinate returned is
 in the *reference* rectified frame (:func:`reference_rectification`: canonical, shared field
 of view), the frame the fix store's observations live in.
 """
@@ -17,7 +19,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
 from phonestereo.features.matching import match_rectified
@@ -26,6 +27,7 @@ from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
@@ -38,25 +40,6 @@ def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
     """The reference rectified frame of a calibration: ``mode``, shared field of view."""
     return Rectification.from_rig(rig, mode)
 
-
-
-@dataclass(frozen=True)
-class PlaneFit:
-    """Robust disparity plane d = a + b·(x − x0) + c·(y − y0) over the kept matches."""
-
-    coef: F64
-    cov: F64
-    x0: float
-    y0: float
-    scatter_px: float
-    n: int
-
-    def predict(self, xy: Any) -> tuple[F64, F64]:
-        """(d, σ_d) at reference-frame points (N, 2)."""
-        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        A = np.column_stack([np.ones(len(p)), p[:, 0] - self.x0, p[:, 1] - self.y0])
-        var = np.einsum("ij,jk,ik->i", A, self.cov, A)
-        return A @ self.coef, np.sqrt(np.clip(var, 0.0, None))
 
 
 @dataclass(frozen=True)
@@ -96,50 +79,6 @@ class RoiMeasurement:
     wt: WTScale | None
     roi_grid: F64
     counts: dict[str, int]
-
-
-def majority(d: Any, *, bin_px: float, tol_px: float, tol_rel: float) -> tuple[float, np.ndarray]:
-    """Majority disparity (thesis §4.1.3): the most populated histogram bin (smoothed over its
-    neighbours), refined to the median of the matches within the band; (value, mask).
-
-    Examples
-    --------
-    >>> v, m = majority([9.9, 10.0, 10.1, 10.05, 3.0, 3.1], bin_px=0.5, tol_px=0.5, tol_rel=0)
-    >>> round(v, 3), m.tolist()
-    (10.025, [True, True, True, True, False, False])
-    """
-    x = np.asarray(d, dtype=np.float64)
-    if x.size == 0:
-        return float("nan"), np.zeros(0, bool)
-    lo = np.floor(x.min() / bin_px) - 1
-    idx = (np.floor(x / bin_px) - lo).astype(np.int64)
-    counts = np.bincount(idx, minlength=int(idx.max()) + 2).astype(np.float64)
-    smooth = np.convolve(counts, [0.5, 1.0, 0.5], mode="same")
-    peak = (int(np.argmax(smooth)) + lo + 0.5) * bin_px
-    tol = max(tol_px, tol_rel * abs(peak))
-    mask = np.abs(x - peak) <= tol
-    value = float(np.median(x[mask]))
-    mask = np.abs(x - value) <= tol
-    return float(np.median(x[mask])), mask
-
-
-def fit_plane(xy: F64, d: F64, sigma: F64) -> PlaneFit:
-    """Robust (soft-L1) weighted plane of d over (x, y); σ from the scatter and Jacobian."""
-    x0, y0 = float(np.mean(xy[:, 0])), float(np.mean(xy[:, 1]))
-    A = np.column_stack([np.ones(len(d)), xy[:, 0] - x0, xy[:, 1] - y0])
-    w = 1.0 / np.clip(sigma, 1e-3, None)
-    Aw, bw = A * w[:, None], d * w
-    p0 = np.linalg.lstsq(Aw, bw, rcond=None)[0]
-    res = least_squares(lambda p: Aw @ p - bw, p0, loss="soft_l1", f_scale=2.0)
-    r = d - A @ res.x
-    rw = r * w
-    inl = np.abs(rw) <= 4.0 * max(1.0, 1.4826 * float(np.median(np.abs(rw))))
-    dof = max(int(inl.sum()) - 3, 1)
-    chi2 = float(np.sum(rw[inl] ** 2)) / dof
-    # σ: Cramér–Rao weights, inflated by the observed scatter when it exceeds them.
-    cov = np.linalg.pinv(Aw[inl].T @ Aw[inl]) * max(chi2, 1.0)
-    scatter = float(1.4826 * np.median(np.abs(r[inl] - np.median(r[inl])))) if inl.any() else 0.0
-    return PlaneFit(np.asarray(res.x), cov, x0, y0, scatter, int(inl.sum()))
 
 
 def _expanded(roi: tuple[int, int, int, int], factor: float, size: tuple[int, int]) -> Any:
@@ -213,7 +152,7 @@ def _match_majority(
     tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
     keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
     m2, sel = majority(res.d[keep], **kw)
-    idx = np.flatnonzero(keep)[sel]
+    idx = follow_plane(res.xy, res.d, res.sigma_d, np.flatnonzero(keep)[sel], tol)
     counts["majority"] = len(idx)
     return res, in_roi, idx, m2, counts
 
