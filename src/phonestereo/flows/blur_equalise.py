@@ -22,9 +22,26 @@ def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
 
 #: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.
 _TILE = 40
+#: At most this many tiles (about): a larger box (a 12 MP ROI: ~190) takes every k-th tile
+#: in x and y, spread over the box; 48 tiles of 40 × 40 px pool ~77 000 pixels per candidate.
+_MAX_TILES = 48
 #: Each tile's alignment search, ± px (the coarse disparity and row offset are whole pixels, the
 #: scale mismatch adds up to ~3 px at a wide box's ends).
 _ALIGN = 3
+
+
+def _tile_starts(x0: int, x1: int, y0: int, y1: int) -> tuple[Any, Any]:
+    """Tile origins along x and y of the region [x0, x1) × [y0, y1): every ``_TILE`` px, thinned
+    by one factor k on both axes (evenly spread, both ends kept) when there are more than
+    ``_MAX_TILES`` in all."""
+    xs, ys = np.arange(x0, x1 - _TILE + 1, _TILE), np.arange(y0, y1 - _TILE + 1, _TILE)
+    k = int(np.ceil(np.sqrt(len(xs) * len(ys) / _MAX_TILES)))
+    if k > 1:
+        xs, ys = (
+            v[np.unique(np.round(np.linspace(0, len(v) - 1, -(-len(v) // k))).astype(int))]
+            for v in (xs, ys)
+        )
+    return xs.tolist(), ys.tolist()
 
 
 def _aligned_tiles(
@@ -44,8 +61,9 @@ def _aligned_tiles(
     r, n = _ALIGN, _TILE + 2 * m
     pad = m + r
     out = []
-    for ty in range(y0, y1 - _TILE + 1, _TILE):
-        for tx in range(x0, x1 - _TILE + 1, _TILE):
+    xs, ys = _tile_starts(x0, x1, y0, y1)
+    for ty in ys:
+        for tx in xs:
             ly, lx, ry, rx = ty - m, tx - m, ty - yi - pad, tx - xi - pad
             if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
                     ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import ShapeError
+from phonestereo.features._threads import background
 from phonestereo.geometry import Camera, Rig, depth_from_disparity
 from phonestereo.geometry.checks import Array, as_points, frozen
 from phonestereo.rectification import frames, maps
@@ -271,15 +272,18 @@ class Rectification:
             calibrated camera's (the message names both sizes).
         """
         images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
-        out = []
-        for role, img in zip(("wide", "tele"), images, strict=True):
-            raw, rect, _ = self._chain(role)
-            shrink = raw.f / rect.f
-            (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
-            out.append(maps.remap_image(
-                img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
-            ))
-        return out[0], out[1]
+        # the tele's maps and remap on the helper thread while this one does the wide's
+        # (OpenCV and the map spline release the GIL; the same pixels either way)
+        tele = background(self._remap_one, "tele", images[1], interpolation)
+        return self._remap_one("wide", images[0], interpolation), tele.result()
+
+    def _remap_one(self, role: str, img: NDArray[Any], interpolation: str) -> NDArray[Any]:
+        raw, rect, _ = self._chain(role)
+        shrink = raw.f / rect.f
+        (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
+        return maps.remap_image(
+            img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
+        )
 
     def _source(
         self, role: str, shrink: float, size: tuple[int, int]
