@@ -4,11 +4,13 @@ image of the pair is blurred to the other's blur before the sub-pixel windows ar
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import cv2
 import numpy as np
 
+from phonestereo.features._threads import run_split
 from phonestereo.flows.coarse import template_peak
 
 
@@ -60,10 +62,13 @@ def _aligned_tiles(
     xi, yi = shift
     r, n = _ALIGN, _TILE + 2 * m
     pad = m + r
-    out = []
     xs, ys = _tile_starts(x0, x1, y0, y1)
-    for ty in ys:
-        for tx in xs:
+    starts = [(tx, ty) for ty in ys for tx in xs]
+    out: list[tuple[Any, Any] | None] = [None] * len(starts)
+
+    def align(idx: Sequence[int]) -> None:  # tiles in order; OpenCV releases the GIL
+        for i in idx:
+            tx, ty = starts[i]
             ly, lx, ry, rx = ty - m, tx - m, ty - yi - pad, tx - xi - pad
             if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
                     ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):
@@ -77,8 +82,10 @@ def _aligned_tiles(
             M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
             tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REFLECT)
-            out.append((ta, tb))
-    return out
+            out[i] = (ta, tb)
+
+    run_split(align, range(len(starts)), min_items=8)
+    return [p for p in out if p is not None]
 
 
 def equalise_blur(
@@ -137,9 +144,19 @@ def equalise_blur(
         sp, sq = float(np.einsum("ijk,ijk->", pa, pa)), float(np.einsum("ijk,ijk->", pb, pb))
         return num / np.sqrt(sp * sq + 1e-12)
 
-    best = (pooled(0.0, 0.0), 0.0, 0.0)
-    for s in sigmas[1:]:
-        best = max(best, (pooled(s, 0.0), s, 0.0), (pooled(0.0, s), 0.0, s))
+    # every candidate (left blurred, right blurred) scored, half on the helper thread, then
+    # compared in the order of the loop they replace (ties go to the earlier one)
+    cands = [(0.0, 0.0)] + [c for s in sigmas[1:] for c in ((s, 0.0), (0.0, s))]
+    scores = [0.0] * len(cands)
+
+    def score(idx: Sequence[int]) -> None:
+        for i in idx:
+            scores[i] = pooled(*cands[i])
+
+    run_split(score, range(len(cands)), min_items=4)
+    best = (scores[0], 0.0, 0.0)
+    for i in range(1, len(cands), 2):
+        best = max(best, (scores[i], *cands[i]), (scores[i + 1], *cands[i + 1]))
     if best[2] > 0:
         # The tele is the sharper one: leave the pair as it is here. The matcher equalises
         # that case itself (features/blur.py), with the blurred image's noise computed from

@@ -272,18 +272,33 @@ class Rectification:
             calibrated camera's (the message names both sizes).
         """
         images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
-        # the tele's maps and remap on the helper thread while this one does the wide's
-        # (OpenCV and the map spline release the GIL; the same pixels either way)
-        tele = background(self._remap_one, "tele", images[1], interpolation)
-        return self._remap_one("wide", images[0], interpolation), tele.result()
+        # the tele's maps, blur and remap on the helper thread while this one does the wide's
+        # (OpenCV releases the GIL; the same pixels either way)
+        tele = background(
+            lambda: self._source_image("tele", images[1]).remap(interpolation)
+        )
+        return self._source_image("wide", images[0]).remap(interpolation), tele.result()
 
-    def _remap_one(self, role: str, img: NDArray[Any], interpolation: str) -> NDArray[Any]:
+    def sources(self, image_wide: Any, image_tele: Any) -> tuple[maps.Source, maps.Source]:
+        """Both raw images prepared for resampling (:class:`~.maps.Source`: the box the maps
+        reach, blurred against aliasing once), to remap several times or in parts.
+
+        ``rect.sources(w, t)[i].remap(interpolation)`` is :meth:`remap`'s image i.
+
+        Raises
+        ------
+        InputError, ShapeError
+            As :meth:`remap`.
+        """
+        images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
+        tele = background(self._source_image, "tele", images[1])
+        return self._source_image("wide", images[0]), tele.result()
+
+    def _source_image(self, role: str, img: NDArray[Any]) -> maps.Source:
         raw, rect, _ = self._chain(role)
         shrink = raw.f / rect.f
         (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
-        return maps.remap_image(
-            img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
-        )
+        return maps.source(img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias)
 
     def _source(
         self, role: str, shrink: float, size: tuple[int, int]
