@@ -20,20 +20,17 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
-from phonestereo.features._threads import background
 from phonestereo.features.matching import match_rectified
-from phonestereo.features.subpixel import PREFILTER_MARGIN
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.blur_equalise import equalise_blur
-from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.roi_window import COARSE_INTERPOLATION, fine_window, remap_pair
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
 from phonestereo.rectification import Rectification, RectifyOptions
-from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
 F64 = Array
 
@@ -178,58 +175,6 @@ def roi_grid(roi: tuple[int, int, int, int], n: int = 9) -> F64:
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-#: The coarse step's window resampling (:func:`measure_roi`): it locates whole-pixel peaks
-#: and compares tiles, so bilinear (~8× faster than Lanczos-4 on the 3× ROI context) serves;
-#: the fine matcher's part of the window is resampled again with the rectification's default.
-COARSE_INTERPOLATION = "cubic"
-#: Px beyond the matcher's crop resampled for it: the blur equalisation's Gaussian (σ ≤ 3,
-#: OpenCV's kernel reaches 12 px) must see the fine pixels only.
-_FINE_GUARD_PX = 16
-
-
-def _remap(sources: tuple[Source, Source], interpolation: str,
-           boxes: tuple[Any, Any] = (None, None)) -> tuple[Any, Any]:
-    """Both images of the window (or the parts ``boxes``), the tele's on the helper thread."""
-    tele = background(sources[1].remap, interpolation, boxes[1])
-    return sources[0].remap(interpolation, boxes[0]), tele.result()
-
-
-def _fine_window(
-    sources: tuple[Source, Source], lw: Any, rt: Any, box: tuple[int, int, int, int],
-    d0: float, e0: float, scale: float, center: tuple[float, float] | None, cfg: RoiConfig,
-) -> tuple[Any, Any]:
-    """The window pair with the fine matcher's part resampled by the default interpolation
-    (and the W-T pre-scale the coarse step chose applied to the tele as it did).
-
-    The part is the matcher's crop (:func:`~phonestereo.features.match_input.crop_box` of the
-    box for the fine disparities d0 ± ``fine_range_px`` and the row band ``_match_majority``
-    uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
-    then the one a whole-window Lanczos-4 remap gives.
-    """
-    mcfg = cfg.match
-    ty = max(int(mcfg.row_tolerance), int(abs(e0)) + 2)
-    reach = int(mcfg.radius) + ty + 3 + PREFILTER_MARGIN + _FINE_GUARD_PX
-    lo_d = int(np.floor(d0)) - cfg.fine_range_px
-    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
-    x, y, w, h = box
-    H, W = lw.shape[:2]
-    x0, x1 = max(min(x, x - hi_d) - reach, 0), min(max(x + w, x + w - lo_d) + reach, W)
-    y0, y1 = max(y - reach, 0), min(y + h + reach, H)
-    part_w = part_t = (x0, y0, x1, y1)
-    if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
-        c = np.array(center)
-        q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
-        lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
-        part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
-    fine_w, fine_t = _remap(sources, DEFAULT_INTERPOLATION, (part_w, part_t))
-    lw, rt = lw.copy(), rt.copy()
-    lw[y0:y1, x0:x1] = fine_w
-    rt[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
-    if scale != 1.0 and center is not None:
-        rt = rescale_tele(rt, scale, center, part_w)
-    return lw, rt
-
-
 def _fail(reason: str, grid: F64, counts: dict[str, int], wt: WTScale | None = None) -> Any:
     z = np.zeros(0)
     return RoiMeasurement(
@@ -332,7 +277,7 @@ def measure_roi(
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
     sources = win.sources(image_wide, image_tele)
-    lw, rt = _remap(sources, COARSE_INTERPOLATION)
+    lw, rt = remap_pair(sources, COARSE_INTERPOLATION)
     box_small = win.points_wide(roi_grid(roi, 3))
     if not np.isfinite(box_small).all():
         return _fail("the ROI does not map into the rectified view", grid, counts)
@@ -378,7 +323,7 @@ def measure_roi(
     if ch.reason:
         return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
-    lw, rt = _fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
+    lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
