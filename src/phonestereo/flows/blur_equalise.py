@@ -24,9 +24,11 @@ def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
 
 #: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.
 _TILE = 40
-#: At most this many tiles (about): a larger box (a 12 MP ROI: ~190) takes every k-th tile
-#: in x and y, spread over the box; 48 tiles of 40 × 40 px pool ~77 000 pixels per candidate.
-_MAX_TILES = 48
+#: At most this many tiles: a larger box (a 12 MP ROI's: ~190) takes every k-th tile in x
+#: and y, spread over the box (k = 2 there: 48 tiles of 40 × 40 px, ~77 000 pixels pooled per
+#: candidate; the same blur chosen on the 12 MP bench set). At 48 the learning flow's face
+#: boxes (60-96 tiles at 2000 × 1500) chose another blur on 1 of 15 captures; at 96 none.
+_MAX_TILES = 96
 #: Each tile's alignment search, ± px (the coarse disparity and row offset are whole pixels, the
 #: scale mismatch adds up to ~3 px at a wide box's ends).
 _ALIGN = 3

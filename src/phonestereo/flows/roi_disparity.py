@@ -26,7 +26,7 @@ from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.roi_window import COARSE_INTERPOLATION, fine_window, remap_pair
+from phonestereo.flows.roi_window import coarse_window, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
@@ -277,7 +277,6 @@ def measure_roi(
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
     sources = win.sources(image_wide, image_tele)
-    lw, rt = remap_pair(sources, COARSE_INTERPOLATION)
     box_small = win.points_wide(roi_grid(roi, 3))
     if not np.isfinite(box_small).all():
         return _fail("the ROI does not map into the rectified view", grid, counts)
@@ -309,6 +308,7 @@ def measure_roi(
         cboxes.append(box)
     c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
@@ -323,7 +323,8 @@ def measure_roi(
     if ch.reason:
         return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
-    lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
+    if two_pass:
+        lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:

@@ -20,7 +20,7 @@ from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
-__all__ = ["COARSE_INTERPOLATION", "fine_window", "remap_pair"]
+__all__ = ["COARSE_INTERPOLATION", "MAX_FINE_SHARE", "coarse_window", "fine_window", "remap_pair"]
 
 
 #: The coarse step's window resampling: it locates whole-pixel peaks and compares tiles.
@@ -40,6 +40,41 @@ def remap_pair(
     return sources[0].remap(interpolation, boxes[0]), tele.result()
 
 
+#: Two passes only when the fine part's bound is at most this share of the window (the
+#: application's 3× context: ~0.35); else one Lanczos-4 pass serves both steps (the learning
+#: flow's face box, ``coarse_expand`` 1, is nearly the whole window).
+MAX_FINE_SHARE = 0.6
+
+
+def _fine_part(
+    box: tuple[int, int, int, int], lo_d: int, hi_d: int, e0: float, cfg: RoiConfig,
+    size: tuple[int, int],
+) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of the window the matcher's crop reaches for disparities
+    lo_d … hi_d (crop_box of the box, its row band and spline margin, + _FINE_GUARD_PX)."""
+    mcfg = cfg.match
+    ty = max(int(mcfg.row_tolerance), int(abs(e0)) + 2)
+    reach = int(mcfg.radius) + ty + 3 + PREFILTER_MARGIN + _FINE_GUARD_PX
+    x, y, w, h = box
+    W, H = size
+    x0, x1 = max(min(x, x - hi_d) - reach, 0), min(max(x + w, x + w - lo_d) + reach, W)
+    return x0, max(y - reach, 0), x1, min(y + h + reach, H)
+
+
+def coarse_window(
+    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig
+) -> tuple[Any, Any, bool]:
+    """The window pair the coarse step reads, and whether the fine part must be resampled
+    again (:func:`fine_window`): cubic when the fine part (bounded by the whole searched
+    range −2 … d_max and the coarse rows) is a small share of the window, else Lanczos-4."""
+    H, W = sources[0].map_x.shape
+    x0, y0, x1, y1 = _fine_part(box, -2 - cfg.fine_range_px, d_max + cfg.fine_range_px,
+                                cfg.coarse_rows, cfg, (W, H))
+    if (x1 - x0) * (y1 - y0) > MAX_FINE_SHARE * W * H:
+        return (*remap_pair(sources, DEFAULT_INTERPOLATION), False)
+    return (*remap_pair(sources, COARSE_INTERPOLATION), True)
+
+
 def fine_window(
     sources: tuple[Source, Source], lw: Any, rt: Any, box: tuple[int, int, int, int],
     d0: float, e0: float, scale: float, center: tuple[float, float] | None, cfg: RoiConfig,
@@ -52,16 +87,10 @@ def fine_window(
     uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
     then the one a whole-window Lanczos-4 remap gives.
     """
-    mcfg = cfg.match
-    ty = max(int(mcfg.row_tolerance), int(abs(e0)) + 2)
-    reach = int(mcfg.radius) + ty + 3 + PREFILTER_MARGIN + _FINE_GUARD_PX
     lo_d = int(np.floor(d0)) - cfg.fine_range_px
     hi_d = int(np.ceil(d0)) + cfg.fine_range_px
-    x, y, w, h = box
     H, W = lw.shape[:2]
-    x0, x1 = max(min(x, x - hi_d) - reach, 0), min(max(x + w, x + w - lo_d) + reach, W)
-    y0, y1 = max(y - reach, 0), min(y + h + reach, H)
-    part_w = part_t = (x0, y0, x1, y1)
+    x0, y0, x1, y1 = part_w = part_t = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
     if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
         c = np.array(center)
         q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
