@@ -138,12 +138,19 @@ def equalise_blur(
         t = strip.reshape(n, len(pairs), n)[m:-m, :, m:-m]  # (rows, tile, cols)
         return t - t.mean(axis=(0, 2), keepdims=True)
 
+    def centred(strip: Any, sigma: float) -> tuple[Any, float]:
+        """The strip's tiles blurred by ``sigma`` (none: 0), means removed, and Σp²."""
+        p = inner(cv2.GaussianBlur(strip, (0, 0), sigma) if sigma > 0 else strip)
+        return p, float(np.einsum("ijk,ijk->", p, p))
+
+    # every candidate blurs one image: the other's unblurred tiles are computed once
+    sharp = (centred(strip_a, 0.0), centred(strip_b, 0.0))
+
     def pooled(sl: float, sr: float) -> float:
         # ZNCC pooled over the tiles (each tile's mean removed): Σpq / √(Σp²·Σq²).
-        pa = inner(cv2.GaussianBlur(strip_a, (0, 0), sl) if sl > 0 else strip_a)
-        pb = inner(cv2.GaussianBlur(strip_b, (0, 0), sr) if sr > 0 else strip_b)
+        pa, sp = centred(strip_a, sl) if sl > 0 else sharp[0]
+        pb, sq = centred(strip_b, sr) if sr > 0 else sharp[1]
         num = float(np.einsum("ijk,ijk->", pa, pb))
-        sp, sq = float(np.einsum("ijk,ijk->", pa, pa)), float(np.einsum("ijk,ijk->", pb, pb))
         return num / np.sqrt(sp * sq + 1e-12)
 
     # every candidate (left blurred, right blurred) scored, half on the helper thread, then
