@@ -284,9 +284,12 @@ def _refine(
         if not len(active):
             break
         th = theta[active]
-        val, inside = sample_windows(right_coef, x0[active], y0[active], th, r, slant)
+        # all windows still active: views of the per-window arrays instead of copies (the
+        # (n, q, M²) float64 basis is megabytes; the same numbers either way)
+        sel: Any = slice(None) if len(active) == n else active
+        val, inside = sample_windows(right_coef, x0[sel], y0[sel], th, r, slant)
         val32 = val.reshape(len(active), -1)
-        t = tmpl[active]
+        t = tmpl[sel]
         if it == 0:  # photometric start: match the weighted mean and standard deviation
             mt, mr = _wsum(t, wn32), _wsum(val32, wn32)
             st = np.sqrt(np.maximum(_wsum((t - mt[:, None]) ** 2, wn32), 0))
@@ -295,13 +298,13 @@ def _refine(
             th[:, 3] = mt - th[:, 2] * mr
         v64 = val32.astype(np.float64)
         a, b = th[:, 2].copy(), th[:, 3].copy()
-        g1 = gram1[active]
-        pv = np.einsum("kqp,kp->kq", bw[active], v64)  # Σ w b_i R
-        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[active], wts)  # Σ w R², Σ w R L
+        g1 = gram1[sel]
+        pv = np.einsum("kqp,kp->kq", bw[sel], v64)  # Σ w b_i R
+        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[sel], wts)  # Σ w R², Σ w R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
-                bt[active] - a[:, None] * pv - b[:, None] * g1[:, :, -1],
+                bt[sel] - a[:, None] * pv - b[:, None] * g1[:, :, -1],
                 (rl - a * rr - b * pv[:, -1])[:, None],
             ],
             axis=1,
