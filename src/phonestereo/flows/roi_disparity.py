@@ -20,6 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError
+from phonestereo.features._threads import background
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.band_gate import band_reason, band_split
@@ -30,7 +31,7 @@ from phonestereo.flows.roi_window import coarse_window, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
-from phonestereo.rectification import Rectification, RectifyOptions
+from phonestereo.rectification import Rectification, RectifyOptions, check_pair
 
 F64 = Array
 
@@ -276,7 +277,10 @@ def measure_roi(
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
-    sources = win.sources(image_wide, image_tele)
+    # both images' maps and blur on the helper thread while this one places the boxes (the
+    # images are checked here: a wrong size raises, whatever the ROI)
+    check_pair(image_wide, image_tele, rig.wide, rig.tele)
+    pending = background(win.sources, image_wide, image_tele)
     box_small = win.points_wide(roi_grid(roi, 3))
     if not np.isfinite(box_small).all():
         return _fail("the ROI does not map into the rectified view", grid, counts)
@@ -308,6 +312,7 @@ def measure_roi(
         cboxes.append(box)
     c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    sources = pending.result()
     lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:
