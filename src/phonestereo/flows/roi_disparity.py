@@ -277,10 +277,11 @@ def measure_roi(
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
-    # both images' maps and blur on the helper thread while this one places the boxes (the
-    # images are checked here: a wrong size raises, whatever the ROI)
-    check_pair(image_wide, image_tele, rig.wide, rig.tele)
-    pending = background(win.sources, image_wide, image_tele)
+    # the tele's maps and antialias blur on the helper thread while this one prepares the
+    # wide and places the boxes (the images are checked first: a wrong size raises)
+    image_wide, image_tele = check_pair(image_wide, image_tele, rig.wide, rig.tele)
+    pending = background(win.source, "tele", image_tele)
+    source_wide = win.source("wide", image_wide)
     box_small = win.points_wide(roi_grid(roi, 3))
     if not np.isfinite(box_small).all():
         return _fail("the ROI does not map into the rectified view", grid, counts)
@@ -312,7 +313,7 @@ def measure_roi(
         cboxes.append(box)
     c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
-    sources = pending.result()
+    sources = (source_wide, pending.result())
     lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:

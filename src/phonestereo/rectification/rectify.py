@@ -274,10 +274,8 @@ class Rectification:
         images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
         # the tele's maps, blur and remap on the helper thread while this one does the wide's
         # (OpenCV releases the GIL; the same pixels either way)
-        tele = background(
-            lambda: self._source_image("tele", images[1]).remap(interpolation)
-        )
-        return self._source_image("wide", images[0]).remap(interpolation), tele.result()
+        tele = background(lambda: self.source("tele", images[1]).remap(interpolation))
+        return self.source("wide", images[0]).remap(interpolation), tele.result()
 
     def sources(self, image_wide: Any, image_tele: Any) -> tuple[maps.Source, maps.Source]:
         """Both raw images prepared for resampling (:class:`~.maps.Source`: the box the maps
@@ -291,10 +289,13 @@ class Rectification:
             As :meth:`remap`.
         """
         images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
-        tele = background(self._source_image, "tele", images[1])
-        return self._source_image("wide", images[0]), tele.result()
+        tele = background(self.source, "tele", images[1])
+        return self.source("wide", images[0]), tele.result()
 
-    def _source_image(self, role: str, img: NDArray[Any]) -> maps.Source:
+    def source(self, role: str, image: Any) -> maps.Source:
+        """One raw image (``role`` "wide" or "tele", checked by :func:`~.maps.check_pair`
+        beforehand) prepared for resampling, as in :meth:`sources`."""
+        img = np.asarray(image)
         raw, rect, _ = self._chain(role)
         shrink = raw.f / rect.f
         (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
