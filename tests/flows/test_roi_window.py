@@ -15,7 +15,7 @@ import pytest
 from phonestereo.features.subpixel import PREFILTER_MARGIN
 from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.roi_window import coarse_window, fine_window
+from phonestereo.flows.roi_window import _fine_part, coarse_window, fine_window
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.rectification import Rectification, RectifyOptions
 
@@ -63,5 +63,9 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
         # pixels (1/32-px map steps): within a few DN, on < 3 % of the pixels
         diff = np.abs(ft[sl].astype(int) - whole_t[sl].astype(int))
         assert (diff > 0).mean() < 0.03 and diff.max() <= 12
-    # outside the part the coarse (cubic) pixels are left as they were
-    assert not np.array_equal(fw, whole_w)
+    # outside the part the coarse (cubic, pre-scaled) pixels are left as they were
+    x0, y0, x1, y1 = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
+    outside = np.ones((H, W), bool)
+    outside[y0:y1, x0:x1] = False
+    assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)
+    assert np.array_equal(ft[outside], rt_coarse[outside])
