@@ -158,12 +158,15 @@ def test_sandwich_equals_crlb_for_uniform_weights() -> None:
 def test_template_gradients_equal_the_spline_derivative() -> None:
     """The fast FIR gradients equal the derivative of the interpolating spline (slow reference:
     prefilter the whole image, then differentiate the cubic B-spline at the integers)."""
-    from phonestereo.features.subpixel import _image_gradients
+    from phonestereo.features.spline_gradients import image_gradients, window_gradients
 
     left, _ = shifted_pair(0.0, 0.0)
     xy = _grid(step=13)
     x0, y0 = xy[:, 0], xy[:, 1]
-    tmpl, gx, gy = _image_gradients(left, x0, y0, 7)
+    tmpl, gx, gy = image_gradients(left, x0, y0, 7)  # dense windows: one filter of their box
+    # window by window (sparse windows' path): the same to float32 rounding (~1e-6 relative)
+    for a, b in zip(window_gradients(left, x0, y0, 7), (tmpl, gx, gy), strict=True):
+        assert np.abs(a - b).max() <= 1e-5 * np.abs(b).max()
     c = bspline_coefficients(left)
     k = np.arange(-8, 9)
     blk = c[(y0[:, None] + k)[:, :, None], (x0[:, None] + k)[:, None, :]]  # (n, 17, 17)

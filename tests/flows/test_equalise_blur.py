@@ -48,3 +48,20 @@ def test_a_blurrier_tele_gets_its_blur_back(e: float) -> None:
     # (1.0 or 1.4; the candidates are 0.4, 0.7, 1.0, 1.4, 1.8, ...).
     _, _, s_l, _ = equalise_blur(left, right, (170, 120, 300, 240), 20.4, round(e))
     assert 1.0 <= s_l <= 1.4
+
+
+def test_a_large_box_is_thinned_evenly_and_chooses_the_same_blur() -> None:
+    from phonestereo.flows import blur_equalise as be
+
+    # A 12 MP ROI's box (~190 tiles of 40 px) keeps every other tile in x and y, spread over
+    # the box with both ends kept; a box of <= _MAX_TILES tiles keeps them all.
+    xs, ys = be._tile_starts(10, 1230, 5, 905)
+    assert len(xs) * len(ys) <= be._MAX_TILES and xs[0] == 10 and ys[0] == 5
+    assert xs[-1] == 10 + 40 * 29 and ys[-1] == 5 + 40 * 21  # the last whole tiles
+    xs, ys = be._tile_starts(0, 320, 0, 240)
+    assert (len(xs), len(ys)) == (8, 6)
+    # On the blurrier-tele pair, a box of 300 tiles (thinned to ~75) still finds the blur.
+    left, right = _pair(1.4, 1.0, 20.4, 0.0)
+    big = (30, 20, 600, 440)
+    _, _, s_l, _ = equalise_blur(left, right, big, 20.4, 0)
+    assert 1.0 <= s_l <= 1.4

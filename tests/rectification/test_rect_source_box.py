@@ -57,3 +57,24 @@ def test_antialias_sigma_is_remap_images_rule() -> None:
     by_hand = cv2.GaussianBlur(img, (0, 0), sigmaX=s, sigmaY=s)
     assert np.array_equal(maps.remap_image(img, *ident, 3.0, True, "linear"), by_hand)
     assert maps.antialias_sigma(1.0) == 0.0
+
+
+@pytest.mark.parametrize("interpolation", ["lanczos4", "cubic"])
+def test_source_parts_equal_the_whole_remap(interpolation: str) -> None:
+    # Rectification.sources + Source.remap(box=...): the ROI flow resamples its window twice
+    # (cubic for the coarse step, Lanczos-4 for the matcher's part, flows/roi_window.py); a
+    # part must be exactly the same pixels as the whole window's remap there (cv2.remap treats
+    # every output pixel on its own).
+    rig = _rig()
+    rect = Rectification.from_rig(rig, "canonical", RectifyOptions(roi=(300, 200, 200, 150),
+                                                                   margin_px=20))
+    rng = np.random.default_rng(2)
+    wide = rng.integers(0, 256, (600, 800)).astype(np.uint8)
+    tele = rng.integers(0, 256, (600, 800)).astype(np.uint8)
+    lw, rt = rect.remap(wide, tele, interpolation=interpolation)
+    src_w, src_t = rect.sources(wide, tele)
+    assert np.array_equal(src_w.remap(interpolation), lw)
+    assert np.array_equal(src_t.remap(interpolation), rt)
+    box = (13, 7, 101, 66)  # (x0, y0, x1, y1)
+    assert np.array_equal(src_w.remap(interpolation, box), lw[7:66, 13:101])
+    assert np.array_equal(src_t.remap(interpolation, box), rt[7:66, 13:101])

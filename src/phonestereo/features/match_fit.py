@@ -4,7 +4,8 @@
 applies its convergence tests, caps the image-based noise estimate by the windows' typical
 residual and measures the pair's misfit floor and normalised-residual bound
 (:mod:`~phonestereo.features.misfit`). The matcher calls it once, and a second time with a wider
-window when the floor says the pair is compression-limited (``MatchConfig.wide_floor``).
+window when the floor says the pair is compression-limited (``MatchConfig.wide_floor``;
+:func:`first_fit` lets a probe of the windows say so without fitting them all twice).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
-__all__ = ["Fit", "NoiseModel", "fit_windows", "scaled"]
+__all__ = ["Fit", "NoiseModel", "first_fit", "fit_windows", "scaled"]
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,45 @@ def fit_windows(
         tail = misfit_tail(ratio, k=cfg.normalized_tail)
         nbound = max(nbound, tail) if np.isfinite(tail) else nbound
     return Fit(ref, ok, floor, nbound, noise, shift_noise, noise_var)
+
+
+#: Windows of the probe fit that can decide a pair is compression-limited (:func:`first_fit`).
+PROBE_WINDOWS = 48
+#: The probe decides only when its floor is at least this many times ``wide_floor``.
+PROBE_MARGIN = 2.0
+
+
+def first_fit(
+    left: F32,
+    coef: F32,
+    xy: Any,
+    d0: F64,
+    e0: F64,
+    r: int,
+    sigma_w: float,
+    nm: NoiseModel,
+    cfg: MatchConfig,
+    correlated: bool = False,
+) -> tuple[Fit, bool]:
+    """The first fit of the windows and whether the pair is compression-limited (refit wide).
+
+    A compression-limited pair discards the first fit: only its misfit floor (a median over
+    the windows) decides the wide refit (``MatchConfig.wide_floor``). Every ``k``-th of the
+    windows (:data:`PROBE_WINDOWS`) is fitted first; a probe floor ≥ :data:`PROBE_MARGIN` ×
+    ``wide_floor`` decides alone (rendered phone JPEGs read 12-145 against 5), anything else
+    fits all windows as before. The returned fit is then the probe's (it is discarded).
+    """
+    can_widen = cfg.misfit_floor and cfg.wide_radius > r
+    n = len(xy)
+    if can_widen and n >= 2 * PROBE_WINDOWS:
+        sub = np.linspace(0, n - 1, PROBE_WINDOWS).round().astype(np.int64)
+        probe = fit_windows(
+            left, coef, np.asarray(xy)[sub], d0[sub], e0[sub], r, sigma_w, nm, cfg, correlated
+        )
+        if probe.floor >= PROBE_MARGIN * cfg.wide_floor:
+            return probe, True
+    fit = fit_windows(left, coef, xy, d0, e0, r, sigma_w, nm, cfg, correlated)
+    return fit, bool(can_widen and fit.floor >= cfg.wide_floor)
 
 
 def _noise_cap(noise: tuple[float, float], residual_var: F64, gain: F64) -> float:

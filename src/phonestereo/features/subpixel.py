@@ -37,6 +37,7 @@ from phonestereo.errors import InputError
 from phonestereo.features._threads import background
 from phonestereo.features.crlb import sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
+from phonestereo.features.spline_gradients import PREFILTER, TAPS, image_gradients
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -44,9 +45,7 @@ I64 = NDArray[np.int64]
 
 __all__ = ["Refinement", "bspline_coefficients", "gaussian_window", "refine_lk", "sample_windows"]
 
-_Z = np.sqrt(3.0) - 2.0  # pole of the cubic B-spline prefilter
-_TAPS = 10  # |z|^11 ≈ 5e-7: the FIR truncation is invisible in 8-bit data
-_PREFILTER = np.sqrt(3.0) * _Z ** np.abs(np.arange(-_TAPS, _TAPS + 1))
+_TAPS, _PREFILTER = TAPS, PREFILTER  # the spline prefilter (features/spline_gradients.py)
 PREFILTER_MARGIN = _TAPS + 2
 N_PARAMS = 6  # d, e, gain, offset, s_x, s_y
 _SIXTH = np.float32(1.0 / 6.0)
@@ -144,45 +143,6 @@ def gaussian_window(radius: int, sigma_w: float) -> F64:
     """Weights exp(−(u² + v²) / 2σ²) on the (2r + 1)² window, peak 1, shape (M, M)."""
     u = np.arange(-radius, radius + 1, dtype=np.float64)
     return np.exp(-0.5 * (u[:, None] ** 2 + u[None, :] ** 2) / float(sigma_w) ** 2)
-
-
-def _derivative_fir(r: int) -> F32:
-    """(M + 2T, M) matrix D with (row of image) @ D = spline ∂/∂x at the M window pixels.
-
-    The spline's y smoothing undoes its y prefilter, so ∂L/∂x at the integers is the image
-    filtered along x only by prefilter ∗ central difference (2T + 1 taps, T = taps + 1).
-    """
-    t, m = _TAPS + 1, 2 * r + 1
-    k = np.pad(_PREFILTER / _PREFILTER.sum(), 1)
-    kd = 0.5 * (np.roll(k, 1) - np.roll(k, -1))  # tap o: 0.5·(k[o − 1] − k[o + 1])
-    mat = np.zeros((m + 2 * t, m))
-    for i in range(2 * t + 1):
-        mat[np.arange(m) + i, np.arange(m)] = kd[i]
-    return mat.astype(np.float32)
-
-
-def _image_gradients(img: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32, F32]:
-    """Windows and the exact spline derivatives ∂L/∂x, ∂L/∂y there, each (n, M²), DN, DN/px.
-
-    Filtered from the image (mirror border) by :func:`_derivative_fir`: the same values as
-    differentiating :func:`bspline_coefficients`, without prefiltering the whole image.
-    """
-    t, m, n = _TAPS + 1, 2 * r + 1, len(x0)
-    h, w = img.shape
-    u, v = np.arange(-r, r + 1), np.arange(-r - t, r + t + 1)
-
-    def mirror(i: I64, size: int) -> I64:
-        i = np.abs(i)
-        return np.where(i > size - 1, 2 * (size - 1) - i, i)
-
-    mat = _derivative_fir(r)
-    ys, xs = mirror(y0[:, None] + v, h), mirror(x0[:, None] + v, w)
-    px = img[(y0[:, None] + u)[:, :, None], xs[:, None, :]]  # (n, M, M + 2t)
-    py = img[ys[:, None, :], (x0[:, None] + u)[:, :, None]]  # (n, M cols, M + 2t rows)
-    gx = px.reshape(n * m, -1).astype(np.float32) @ mat
-    gy = py.reshape(n * m, -1).astype(np.float32) @ mat
-    gy = gy.reshape(n, m, m).transpose(0, 2, 1).reshape(n, m * m)
-    return np.ascontiguousarray(px[:, :, t : t + m].reshape(n, m * m)), gx.reshape(n, m * m), gy
 
 
 def _chain(theta: F64, slant: bool) -> F64:
@@ -298,7 +258,7 @@ def _refine(
     """:func:`refine_lk` of a batch of windows (checked inside ``left``)."""
     n, x0, y0 = len(xy), xy[:, 0], xy[:, 1]
     npar = N_PARAMS if slant else 4
-    tmpl, tgx, tgy = _image_gradients(left, x0, y0, r)
+    tmpl, tgx, tgy = image_gradients(left, x0, y0, r)
     wts = gaussian_window(r, sigma_w).ravel()
     wn = wts / wts.sum()
     u = np.arange(-r, r + 1, dtype=np.float64)
@@ -324,9 +284,12 @@ def _refine(
         if not len(active):
             break
         th = theta[active]
-        val, inside = sample_windows(right_coef, x0[active], y0[active], th, r, slant)
+        # all windows still active: views of the per-window arrays instead of copies (the
+        # (n, q, M²) float64 basis is megabytes; the same numbers either way)
+        sel: Any = slice(None) if len(active) == n else active
+        val, inside = sample_windows(right_coef, x0[sel], y0[sel], th, r, slant)
         val32 = val.reshape(len(active), -1)
-        t = tmpl[active]
+        t = tmpl[sel]
         if it == 0:  # photometric start: match the weighted mean and standard deviation
             mt, mr = _wsum(t, wn32), _wsum(val32, wn32)
             st = np.sqrt(np.maximum(_wsum((t - mt[:, None]) ** 2, wn32), 0))
@@ -335,13 +298,13 @@ def _refine(
             th[:, 3] = mt - th[:, 2] * mr
         v64 = val32.astype(np.float64)
         a, b = th[:, 2].copy(), th[:, 3].copy()
-        g1 = gram1[active]
-        pv = np.einsum("kqp,kp->kq", bw[active], v64)  # Σ w b_i R
-        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[active], wts)  # Σ w R², Σ w R L
+        g1 = gram1[sel]
+        pv = np.einsum("kqp,kp->kq", bw[sel], v64)  # Σ w b_i R
+        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[sel], wts)  # Σ w R², Σ w R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
-                bt[active] - a[:, None] * pv - b[:, None] * g1[:, :, -1],
+                bt[sel] - a[:, None] * pv - b[:, None] * g1[:, :, -1],
                 (rl - a * rr - b * pv[:, -1])[:, None],
             ],
             axis=1,

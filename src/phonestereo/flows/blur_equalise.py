@@ -4,11 +4,13 @@ image of the pair is blurred to the other's blur before the sub-pixel windows ar
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import cv2
 import numpy as np
 
+from phonestereo.features._threads import run_split
 from phonestereo.flows.coarse import template_peak
 
 
@@ -22,9 +24,28 @@ def _residual_shift(tpl: Any, search: Any) -> tuple[float, float]:
 
 #: Tile size, px: a W-T scale mismatch of 2 % moves a tile's ends by < 0.4 px against each other.
 _TILE = 40
+#: At most this many tiles: a larger box (a 12 MP ROI's: ~190) takes every k-th tile in x
+#: and y, spread over the box (k = 2 there: 48 tiles of 40 × 40 px, ~77 000 pixels pooled per
+#: candidate; the same blur chosen on the 12 MP bench set). At 48 the learning flow's face
+#: boxes (60-96 tiles at 2000 × 1500) chose another blur on 1 of 15 captures; at 96 none.
+_MAX_TILES = 96
 #: Each tile's alignment search, ± px (the coarse disparity and row offset are whole pixels, the
 #: scale mismatch adds up to ~3 px at a wide box's ends).
 _ALIGN = 3
+
+
+def _tile_starts(x0: int, x1: int, y0: int, y1: int) -> tuple[Any, Any]:
+    """Tile origins along x and y of the region [x0, x1) × [y0, y1): every ``_TILE`` px, thinned
+    by one factor k on both axes (evenly spread, both ends kept) when there are more than
+    ``_MAX_TILES`` in all."""
+    xs, ys = np.arange(x0, x1 - _TILE + 1, _TILE), np.arange(y0, y1 - _TILE + 1, _TILE)
+    k = int(np.ceil(np.sqrt(len(xs) * len(ys) / _MAX_TILES)))
+    if k > 1:
+        xs, ys = (
+            v[np.unique(np.round(np.linspace(0, len(v) - 1, -(-len(v) // k))).astype(int))]
+            for v in (xs, ys)
+        )
+    return xs.tolist(), ys.tolist()
 
 
 def _aligned_tiles(
@@ -43,9 +64,13 @@ def _aligned_tiles(
     xi, yi = shift
     r, n = _ALIGN, _TILE + 2 * m
     pad = m + r
-    out = []
-    for ty in range(y0, y1 - _TILE + 1, _TILE):
-        for tx in range(x0, x1 - _TILE + 1, _TILE):
+    xs, ys = _tile_starts(x0, x1, y0, y1)
+    starts = [(tx, ty) for ty in ys for tx in xs]
+    out: list[tuple[Any, Any] | None] = [None] * len(starts)
+
+    def align(idx: Sequence[int]) -> None:  # tiles in order; OpenCV releases the GIL
+        for i in idx:
+            tx, ty = starts[i]
             ly, lx, ry, rx = ty - m, tx - m, ty - yi - pad, tx - xi - pad
             if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
                     ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):
@@ -59,8 +84,10 @@ def _aligned_tiles(
             M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
             tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REFLECT)
-            out.append((ta, tb))
-    return out
+            out[i] = (ta, tb)
+
+    run_split(align, range(len(starts)), min_items=8)
+    return [p for p in out if p is not None]
 
 
 def equalise_blur(
@@ -111,17 +138,34 @@ def equalise_blur(
         t = strip.reshape(n, len(pairs), n)[m:-m, :, m:-m]  # (rows, tile, cols)
         return t - t.mean(axis=(0, 2), keepdims=True)
 
+    def centred(strip: Any, sigma: float) -> tuple[Any, float]:
+        """The strip's tiles blurred by ``sigma`` (none: 0), means removed, and Σp²."""
+        p = inner(cv2.GaussianBlur(strip, (0, 0), sigma) if sigma > 0 else strip)
+        return p, float(np.einsum("ijk,ijk->", p, p))
+
+    # every candidate blurs one image: the other's unblurred tiles are computed once
+    sharp = (centred(strip_a, 0.0), centred(strip_b, 0.0))
+
     def pooled(sl: float, sr: float) -> float:
         # ZNCC pooled over the tiles (each tile's mean removed): Σpq / √(Σp²·Σq²).
-        pa = inner(cv2.GaussianBlur(strip_a, (0, 0), sl) if sl > 0 else strip_a)
-        pb = inner(cv2.GaussianBlur(strip_b, (0, 0), sr) if sr > 0 else strip_b)
+        pa, sp = centred(strip_a, sl) if sl > 0 else sharp[0]
+        pb, sq = centred(strip_b, sr) if sr > 0 else sharp[1]
         num = float(np.einsum("ijk,ijk->", pa, pb))
-        sp, sq = float(np.einsum("ijk,ijk->", pa, pa)), float(np.einsum("ijk,ijk->", pb, pb))
         return num / np.sqrt(sp * sq + 1e-12)
 
-    best = (pooled(0.0, 0.0), 0.0, 0.0)
-    for s in sigmas[1:]:
-        best = max(best, (pooled(s, 0.0), s, 0.0), (pooled(0.0, s), 0.0, s))
+    # every candidate (left blurred, right blurred) scored, half on the helper thread, then
+    # compared in the order of the loop they replace (ties go to the earlier one)
+    cands = [(0.0, 0.0)] + [c for s in sigmas[1:] for c in ((s, 0.0), (0.0, s))]
+    scores = [0.0] * len(cands)
+
+    def score(idx: Sequence[int]) -> None:
+        for i in idx:
+            scores[i] = pooled(*cands[i])
+
+    run_split(score, range(len(cands)), min_items=4)
+    best = (scores[0], 0.0, 0.0)
+    for i in range(1, len(cands), 2):
+        best = max(best, (scores[i], *cands[i]), (scores[i + 1], *cands[i + 1]))
     if best[2] > 0:
         # The tele is the sharper one: leave the pair as it is here. The matcher equalises
         # that case itself (features/blur.py), with the blurred image's noise computed from

@@ -7,12 +7,14 @@ defocus before the windows are fitted.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 
+from phonestereo.features._threads import run_split
 from phonestereo.geometry.checks import Array
 
 F64 = Array
@@ -144,15 +146,22 @@ def _tile_scores(
     r = search_px
     H, W = right.shape[:2]
     out = np.full((5, n * n), np.nan)
-    for i in range(n * n):
-        tx, ty = x + (i % n) * tw, y + (i // n) * th
-        sx, sy = round(tx - d) - r, round(ty - e) - r
-        tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
-        if sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H or tpl.std() < 1e-3:
-            continue
-        win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32)
-        z, fx, fy = template_peak(win, tpl)
-        out[:, i] = (z, tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
+
+    def tiles(idx: Sequence[int]) -> None:  # half of them on the helper thread (OpenCV)
+        for i in idx:
+            tx, ty = x + (i % n) * tw, y + (i // n) * th
+            sx, sy = round(tx - d) - r, round(ty - e) - r
+            tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
+            if (sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H
+                    or tpl.std() < 1e-3):
+                continue
+            win = np.ascontiguousarray(
+                right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32
+            )
+            z, fx, fy = template_peak(win, tpl)
+            out[:, i] = (z, tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
+
+    run_split(tiles, range(n * n), min_items=4)
     return out[0], out[1], out[2], out[3], out[4]
 
 
@@ -213,16 +222,28 @@ def tile_wt_scale(
     return 1.0 / (1.0 - b), int(ok.sum()), zm
 
 
-def rescale_tele(right: Any, scale: float, center: tuple[float, float]) -> Any:
+def rescale_tele(
+    right: Any, scale: float, center: tuple[float, float],
+    box: tuple[int, int, int, int] | None = None,
+) -> Any:
     """The rectified tele window scaled by ``scale`` about ``center`` (x, y): the pixel at q
     moves to center + scale·(q − center), the W-T scale's correction of
-    :class:`~phonestereo.fixes.wt_scale.WTScale` applied to the image."""
+    :class:`~phonestereo.fixes.wt_scale.WTScale` applied to the image. With ``box``
+    (x0, y0, x1, y1) only that part of the output is computed (the rest is ``right``'s)."""
     k = 1.0 / scale
     cx, cy = center
-    m = np.array([[k, 0, cx * (1 - k)], [0, k, cy * (1 - k)]], dtype=np.float32)
+    x0, y0 = (0, 0) if box is None else box[:2]
+    # output pixel (x0 + u, y0 + v) reads right at c + k·(x0 + u − c)
+    m = np.array([[k, 0, cx * (1 - k) + k * x0], [0, k, cy * (1 - k) + k * y0]], np.float32)
     h, w = right.shape[:2]
     flags = cv2.WARP_INVERSE_MAP | cv2.INTER_CUBIC
-    return cv2.warpAffine(right, m, (w, h), flags=flags, borderMode=cv2.BORDER_CONSTANT)
+    if box is None:
+        return cv2.warpAffine(right, m, (w, h), flags=flags, borderMode=cv2.BORDER_CONSTANT)
+    out = right.copy()
+    out[y0 : box[3], x0 : box[2]] = cv2.warpAffine(
+        right, m, (box[2] - x0, box[3] - y0), flags=flags, borderMode=cv2.BORDER_CONSTANT
+    )
+    return out
 
 
 def peak_contrast(

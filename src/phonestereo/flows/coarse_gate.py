@@ -102,10 +102,16 @@ class CoarseChoice:
 
 
 def _first_usable(
-    lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig
+    lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig,
+    first: CoarsePeak | None = None,
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
-    for cbox in boxes:
-        cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+    """The first box whose coarse peak can be used (``first``: the first box's peak on this
+    very pair, already searched)."""
+    for i, cbox in enumerate(boxes):
+        if i == 0 and first is not None:
+            cp = first
+        else:
+            cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg)
         if not why:
             break
@@ -138,6 +144,7 @@ def coarse_peak(
     assert boxes, "no coarse box"
     b0 = boxes[0]
     tz, s = float("nan"), float("nan")
+    p0: CoarsePeak | None = None
     if center is not None:
         p0 = coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
         if np.isfinite(p0.d):
@@ -151,7 +158,7 @@ def coarse_peak(
         if not why:
             return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
         why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
-    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg)
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
     if why_s:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError
+from phonestereo.features._threads import background
 from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.band_gate import band_reason, band_split
@@ -28,10 +29,11 @@ from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
+from phonestereo.flows.roi_window import coarse_window, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array
-from phonestereo.rectification import Rectification, RectifyOptions
+from phonestereo.rectification import Rectification, RectifyOptions, check_pair
 
 F64 = Array
 
@@ -214,7 +216,11 @@ def measure_roi(
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = win.points_wide(grid_raw) + shift
     counts: dict[str, int] = {}
-    lw, rt = win.remap(image_wide, image_tele)
+    # the tele's maps and antialias blur on the helper thread while this one prepares the
+    # wide and places the boxes (the images are checked first: a wrong size raises)
+    image_wide, image_tele = check_pair(image_wide, image_tele, rig.wide, rig.tele)
+    pending = background(win.source, "tele", image_tele)
+    source_wide = win.source("wide", image_wide)
     box_small = win.points_wide(roi_grid(roi, 3))
     if not np.isfinite(box_small).all():
         return _fail("the ROI does not map into the rectified view", grid, counts)
@@ -246,6 +252,8 @@ def measure_roi(
         cboxes.append(box)
     c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    sources = (source_wide, pending.result())
+    lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
@@ -260,6 +268,8 @@ def measure_roi(
     if ch.reason:
         return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
+    if two_pass:
+        lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
     slo, shi = box_small.min(0), box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:

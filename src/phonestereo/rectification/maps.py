@@ -11,6 +11,7 @@ tests/rectification/test_rect_maps.py).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -157,6 +158,51 @@ def antialias_sigma(shrink: float) -> float:
     return 0.5 * (shrink - 1.0) if shrink > 1.0 + 1e-6 else 0.0
 
 
+@dataclass(frozen=True, eq=False)
+class Source:
+    """A raw image ready to resample: the box of it the maps reach, blurred against aliasing
+    when the rectification shrinks it, and the maps shifted into that box (float32 (H', W')).
+
+    :meth:`Rectification.sources` prepares both images once; :meth:`remap` then resamples all
+    of the window or a part of it, with any interpolation (the ROI flow's coarse step reads a
+    bilinear window, its fine matcher a Lanczos-4 part of it: the same pixels there as
+    :meth:`Rectification.remap`, since cv2.remap treats every output pixel on its own).
+    """
+
+    image: NDArray[Any]
+    map_x: NDArray[np.float32]
+    map_y: NDArray[np.float32]
+
+    def remap(
+        self, interpolation: str = DEFAULT_INTERPOLATION,
+        box: tuple[int, int, int, int] | None = None,
+    ) -> NDArray[Any]:
+        """The rectified image, or its part ``box`` = (x0, y0, x1, y1) (ends exclusive)."""
+        if interpolation not in _INTERP:
+            raise InputError(
+                f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}"
+            )
+        mx, my = self.map_x, self.map_y
+        if box is not None:
+            x0, y0, x1, y1 = box
+            mx, my = mx[y0:y1, x0:x1], my[y0:y1, x0:x1]
+        out = cv2.remap(self.image, mx, my, _INTERP[interpolation],
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        return np.asarray(out)
+
+
+def source(
+    image: NDArray[Any], map_x: NDArray[np.float32], map_y: NDArray[np.float32], shrink: float,
+    antialias: bool = True,
+) -> Source:
+    """:class:`Source` of ``image`` (the box the maps reach, maps already shifted into it):
+    blurred by :func:`antialias_sigma` when it is shrunk and ``antialias``."""
+    sigma = antialias_sigma(shrink) if antialias else 0.0
+    if sigma > 0:
+        image = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=sigma)
+    return Source(image, map_x, map_y)
+
+
 def remap_image(
     image: NDArray[Any],
     map_x: NDArray[np.float32],
@@ -183,11 +229,4 @@ def remap_image(
     """
     if interpolation not in _INTERP:
         raise InputError(f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}")
-    src = image
-    sigma = antialias_sigma(shrink) if antialias else 0.0
-    if sigma > 0:
-        src = cv2.GaussianBlur(image, (0, 0), sigmaX=sigma, sigmaY=sigma)
-    out = cv2.remap(
-        src, map_x, map_y, _INTERP[interpolation], borderMode=cv2.BORDER_CONSTANT, borderValue=0
-    )
-    return np.asarray(out)
+    return source(image, map_x, map_y, shrink, antialias).remap(interpolation)

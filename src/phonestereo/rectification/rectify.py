@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.errors import ShapeError
+from phonestereo.features._threads import background
 from phonestereo.geometry import Camera, Rig, depth_from_disparity
 from phonestereo.geometry.checks import Array, as_points, frozen
 from phonestereo.rectification import frames, maps
@@ -271,15 +272,34 @@ class Rectification:
             calibrated camera's (the message names both sizes).
         """
         images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
-        out = []
-        for role, img in zip(("wide", "tele"), images, strict=True):
-            raw, rect, _ = self._chain(role)
-            shrink = raw.f / rect.f
-            (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
-            out.append(maps.remap_image(
-                img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias, interpolation
-            ))
-        return out[0], out[1]
+        # the tele's maps, blur and remap on the helper thread while this one does the wide's
+        # (OpenCV releases the GIL; the same pixels either way)
+        tele = background(lambda: self.source("tele", images[1]).remap(interpolation))
+        return self.source("wide", images[0]).remap(interpolation), tele.result()
+
+    def sources(self, image_wide: Any, image_tele: Any) -> tuple[maps.Source, maps.Source]:
+        """Both raw images prepared for resampling (:class:`~.maps.Source`: the box the maps
+        reach, blurred against aliasing once), to remap several times or in parts.
+
+        ``rect.sources(w, t)[i].remap(interpolation)`` is :meth:`remap`'s image i.
+
+        Raises
+        ------
+        InputError, ShapeError
+            As :meth:`remap`.
+        """
+        images = maps.check_pair(image_wide, image_tele, self.rig.wide, self.rig.tele)
+        tele = background(self.source, "tele", images[1])
+        return self.source("wide", images[0]), tele.result()
+
+    def source(self, role: str, image: Any) -> maps.Source:
+        """One raw image (``role`` "wide" or "tele", checked by :func:`~.maps.check_pair`
+        beforehand) prepared for resampling, as in :meth:`sources`."""
+        img = np.asarray(image)
+        raw, rect, _ = self._chain(role)
+        shrink = raw.f / rect.f
+        (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
+        return maps.source(img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias)
 
     def _source(
         self, role: str, shrink: float, size: tuple[int, int]

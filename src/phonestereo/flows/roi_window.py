@@ -1,0 +1,108 @@
+"""The ROI window's two resamplings (:func:`~phonestereo.flows.roi_disparity.measure_roi`).
+
+The coarse step (whole-pixel peaks and tile comparisons over the 3× ROI context) reads the
+window resampled by OpenCV's cubic; the fine matcher's part of it — its crop for the coarse
+disparity ± ``fine_range_px`` plus a guard — is resampled again with the rectification's
+default (Lanczos-4, :data:`~phonestereo.rectification.maps.DEFAULT_INTERPOLATION`), so every
+pixel the matcher and the blur equalisation read is the one a whole-window Lanczos-4 remap
+gives (issue #18: the window remap was ~35 % of ``measure_roi`` at 12 MP).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from phonestereo.features._threads import background
+from phonestereo.features.subpixel import PREFILTER_MARGIN
+from phonestereo.flows.coarse import rescale_tele
+from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
+
+__all__ = ["COARSE_INTERPOLATION", "MAX_FINE_SHARE", "coarse_window", "fine_window", "remap_pair"]
+
+
+#: The coarse step's window resampling: it locates whole-pixel peaks and compares tiles.
+#: OpenCV's cubic is ~3× faster than Lanczos-4 and moves the coarse ZNCCs and the tile test's t
+#: by ≤ 0.003 and ≤ 1 % on the bench sets (bilinear, ~10× faster: +0.02 and −4 %).
+COARSE_INTERPOLATION = "cubic"
+#: Px beyond the matcher's crop resampled for it: the blur equalisation's Gaussian (σ ≤ 3,
+#: OpenCV's kernel reaches 12 px) must see the fine pixels only.
+_FINE_GUARD_PX = 16
+
+
+def remap_pair(
+    sources: tuple[Source, Source], interpolation: str, boxes: tuple[Any, Any] = (None, None)
+) -> tuple[Any, Any]:
+    """Both images of the window (or the parts ``boxes``), the tele's on the helper thread."""
+    tele = background(sources[1].remap, interpolation, boxes[1])
+    return sources[0].remap(interpolation, boxes[0]), tele.result()
+
+
+#: Two passes only when the fine part's bound is at most this share of the window (the
+#: application's 3× context: ~0.35); else one Lanczos-4 pass serves both steps (the learning
+#: flow's face box, ``coarse_expand`` 1, is nearly the whole window).
+MAX_FINE_SHARE = 0.6
+
+
+def _fine_part(
+    box: tuple[int, int, int, int], lo_d: int, hi_d: int, e0: float, cfg: RoiConfig,
+    size: tuple[int, int],
+) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of the window the matcher's crop reaches for disparities
+    lo_d … hi_d (crop_box of the box, its row band and spline margin, + _FINE_GUARD_PX)."""
+    mcfg = cfg.match
+    ty = max(int(mcfg.row_tolerance), int(abs(e0)) + 2)
+    reach = int(mcfg.radius) + ty + 3 + PREFILTER_MARGIN + _FINE_GUARD_PX
+    x, y, w, h = box
+    W, H = size
+    x0, x1 = max(min(x, x - hi_d) - reach, 0), min(max(x + w, x + w - lo_d) + reach, W)
+    return x0, max(y - reach, 0), x1, min(y + h + reach, H)
+
+
+def coarse_window(
+    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig
+) -> tuple[Any, Any, bool]:
+    """The window pair the coarse step reads, and whether the fine part must be resampled
+    again (:func:`fine_window`): cubic when the fine part (bounded by the whole searched
+    range −2 … d_max and the coarse rows) is a small share of the window, else Lanczos-4."""
+    H, W = sources[0].map_x.shape
+    x0, y0, x1, y1 = _fine_part(box, -2 - cfg.fine_range_px, d_max + cfg.fine_range_px,
+                                cfg.coarse_rows, cfg, (W, H))
+    if (x1 - x0) * (y1 - y0) > MAX_FINE_SHARE * W * H:
+        return (*remap_pair(sources, DEFAULT_INTERPOLATION), False)
+    return (*remap_pair(sources, COARSE_INTERPOLATION), True)
+
+
+def fine_window(
+    sources: tuple[Source, Source], lw: Any, rt: Any, box: tuple[int, int, int, int],
+    d0: float, e0: float, scale: float, center: tuple[float, float] | None, cfg: RoiConfig,
+) -> tuple[Any, Any]:
+    """The window pair with the fine matcher's part resampled by the default interpolation
+    (and the W-T pre-scale the coarse step chose applied to the tele as it did).
+
+    The part is the matcher's crop (:func:`~phonestereo.features.match_input.crop_box` of the
+    box for the fine disparities d0 ± ``fine_range_px`` and the row band ``_match_majority``
+    uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
+    then the one a whole-window Lanczos-4 remap gives.
+    """
+    lo_d = int(np.floor(d0)) - cfg.fine_range_px
+    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
+    H, W = lw.shape[:2]
+    x0, y0, x1, y1 = part_w = part_t = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
+    if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
+        c = np.array(center)
+        q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
+        lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
+        part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
+    fine_w, fine_t = remap_pair(sources, DEFAULT_INTERPOLATION, (part_w, part_t))
+    lw = lw.copy()
+    lw[y0:y1, x0:x1] = fine_w
+    if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
+        src = rt.copy()
+        src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
+        fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
+    rt = rt.copy()
+    rt[y0:y1, x0:x1] = fine_t
+    return lw, rt

@@ -1,0 +1,71 @@
+"""The ROI window's two resamplings (flows/roi_window.py): the matcher reads Lanczos-4 pixels.
+
+The coarse step reads a cubic window; the part the fine matcher and the blur equalisation read
+is resampled again with the rectification's default. Every pixel of the matcher's crop (and of
+the blur's reach around it) must be exactly the whole-window Lanczos-4 remap's, with and
+without the W-T pre-scale, or the fine disparities would change with the speed-up.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from phonestereo.features.subpixel import PREFILTER_MARGIN
+from phonestereo.flows.coarse import rescale_tele
+from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.roi_window import _fine_part, coarse_window, fine_window
+from phonestereo.geometry import Camera, Rig, Transform
+from phonestereo.rectification import Rectification, RectifyOptions
+
+
+def _setup() -> tuple[Rectification, np.ndarray, np.ndarray]:
+    wide = Camera((800, 600), 600.0, 600.0, 399.5, 299.5)
+    tele = Camera((800, 600), 1800.0, 1800.0, 401.0, 298.0)
+    rig = Rig(wide, tele, Transform.from_rotvec([0.002, -0.003, 0.004], [0.0, -0.012, 0.0]))
+    # a 3x ROI context box with a 40-px disparity margin, as measure_roi builds it
+    opts = RectifyOptions(roi=(200, 150, 400, 300), margin_px=40, grid_step_px=16)
+    rect = Rectification.from_rig(rig, "canonical", opts)
+    rng = np.random.default_rng(3)
+    w = cv2.GaussianBlur(rng.uniform(0, 255, (600, 800)).astype(np.float32), (0, 0), 1.0)
+    t = cv2.GaussianBlur(rng.uniform(0, 255, (600, 800)).astype(np.float32), (0, 0), 1.0)
+    return rect, w.astype(np.uint8), t.astype(np.uint8)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1.03])
+def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> None:
+    rect, w, t = _setup()
+    W, H = rect.wide_rect.size
+    sources = rect.sources(w, t)
+    box = (W // 3, H // 3, W // 3, H // 3)  # the expanded ROI inside the 3x context window
+    cfg = RoiConfig()
+    lw, rt, two_pass = coarse_window(sources, box, 40, cfg)
+    assert two_pass  # the fine part is a small share of this window
+    d0, e0, center = 12.3, -2.0, (W / 2 + 17.0, H / 2 - 9.0)
+    rt_coarse = rescale_tele(rt, scale, center) if scale != 1.0 else rt
+    fw, ft = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg)
+    whole_w, whole_t = rect.remap(w, t)  # Lanczos-4 everywhere
+    if scale != 1.0:
+        whole_t = rescale_tele(whole_t, scale, center)
+    # The matcher's crop for d0 ± fine_range_px and the row band, plus the blur's 12-px reach:
+    # every pixel there is the whole-window remap's (fine_window's guard is 16 px).
+    ty = max(cfg.match.row_tolerance, int(abs(e0)) + 2)
+    reach = cfg.match.radius + ty + 3 + PREFILTER_MARGIN + 12
+    lo_d, hi_d = int(np.floor(d0)) - cfg.fine_range_px, int(np.ceil(d0)) + cfg.fine_range_px
+    x, y, bw, bh = box
+    sl = np.s_[y - reach : y + bh + reach, x - hi_d - reach : x + bw - lo_d + reach]
+    assert np.array_equal(fw[sl], whole_w[sl])
+    if scale == 1.0:
+        assert np.array_equal(ft[sl], whole_t[sl])
+    else:
+        # the pre-scale of a part rounds OpenCV's fixed-point coordinates differently on a few
+        # pixels (1/32-px map steps): within a few DN, on < 3 % of the pixels
+        diff = np.abs(ft[sl].astype(int) - whole_t[sl].astype(int))
+        assert (diff > 0).mean() < 0.03 and diff.max() <= 12
+    # outside the part the coarse (cubic, pre-scaled) pixels are left as they were
+    x0, y0, x1, y1 = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
+    outside = np.ones((H, W), bool)
+    outside[y0:y1, x0:x1] = False
+    assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)
+    assert np.array_equal(ft[outside], rt_coarse[outside])
