@@ -52,6 +52,7 @@ def _characteristics(cal: Calibration, role: str) -> dict[str, Any]:
     pre = [4, 4, 4 + 2 * w + 2 * ox, 4 + 2 * h + 2 * oy]
     active = [pre[0] + 8, pre[1] + 8, pre[2] - 8, pre[3] - 8]
     k1, k2, p1, p2, k3 = cam.lens.coefficients
+    f_mm = cal.conditions.wide_focal_length_mm if role == "wide" else None
     if role == "wide":
         R, c = R0, np.zeros(3)
     else:
@@ -66,6 +67,7 @@ def _characteristics(cal: Calibration, role: str) -> dict[str, Any]:
         "android.lens.poseTranslation": [float(v) for v in c],
         "android.lens.poseReference": 0,
         "android.lens.info.minimumFocusDistance": 10.0,
+        **({"android.lens.info.availableFocalLengths": [f_mm]} if f_mm is not None else {}),
         "android.sensor.info.activeArraySize": active,
         "android.sensor.info.preCorrectionActiveArraySize": pre,
         "android.sensor.orientation": 90,

@@ -34,7 +34,7 @@ def _pixel_characteristics() -> AndroidCharacteristics:
     chars = {f"android.{k}": v for k, v in src.items() if k in (
         "lens.intrinsicCalibration", "lens.distortion", "lens.poseRotation",
         "lens.poseTranslation", "lens.poseReference", "sensor.orientation", "lens.facing",
-        "lens.info.minimumFocusDistance")}
+        "lens.info.minimumFocusDistance", "lens.info.availableFocalLengths")}
     # Not in the source file: the array size. The Pixel main sensor is 4032×3024 (12.2 MP);
     # its printed c_x, c_y = 2019.8, 1542.3 sit 4 and 30 px from that array's centre.
     chars["android.sensor.info.activeArraySize"] = [0, 0, 4032, 3024]
@@ -64,6 +64,7 @@ def test_real_pixel_camera2_vector_imports_under_the_documented_conventions() ->
     # Sensor orientation 90 (back camera): the image x axis runs along the device's −y.
     np.testing.assert_allclose(T.R.T[:, 0], [0.0, -1.0, 0.0], atol=1e-7)
     assert chars.sensor_orientation == 90
+    assert chars.available_focal_lengths == (6.81,)  # the Pixel main camera's lens, mm
 
 
 def test_quaternion_formula_matches_scipy() -> None:
@@ -107,6 +108,11 @@ def test_round_trip_reproduces_calibration_and_manifest(sim_set: Path, tmp_path:
         assert np.abs(np.subtract(a.lens.coefficients, b.lens.coefficients)).max() <= 1e-15
     Ta, Tb = native_cal.rig.T_tele_wide, cal.rig.T_tele_wide
     assert np.abs(Ta.R - Tb.R).max() <= 1e-9 and np.abs(Ta.t - Tb.t).max() <= 1e-9
+    # LENS_INFO_AVAILABLE_FOCAL_LENGTHS carries the wide's focal length (the focus breathing's
+    # input); the calibration focus is not in Camera2, so it is not invented.
+    wide_f = native_cal.conditions.wide_focal_length_mm
+    assert wide_f is not None and cal.conditions.wide_focal_length_mm == wide_f
+    assert cal.conditions.focus_distance_m is None
     got = load_capture_set(tmp_path / "set")
     assert [c.id for c in got.captures()] == [c.id for c in native.captures()]
     for a, b in zip(native.captures(), got.captures(), strict=True):

@@ -29,6 +29,9 @@ documentation (developer.android.com/reference/android/hardware/camera2/):
 * **Which camera is the tele**: the larger focal length in output pixels per output width
   (the narrower field of view).
 * ``time_s`` = (``SENSOR_TIMESTAMP`` of the wide image − the session's first frame's) / 1e9.
+* ``conditions.wide_focal_length_mm`` = the wide's ``LENS_INFO_AVAILABLE_FOCAL_LENGTHS`` when it
+  lists one focal length (mm); Camera2 does not say at which focus the intrinsics hold, so the
+  focus breathing correction needs ``conditions.focus_distance_m`` added by hand.
 * ``focus_mode`` = "manual" when ``CONTROL_AF_MODE`` is OFF (0), else "auto";
   ``focus_position`` = the wide camera's ``LENS_FOCUS_DISTANCE`` in dioptres.
 * **Gravity**: ``SensorEvent.values`` of ``TYPE_ACCELEROMETER`` is the specific force (at
@@ -269,7 +272,11 @@ def import_android(dump: str | os.PathLike[str], out: str | os.PathLike[str]) ->
     )
     rig = Rig(cams[wide_id], cams[tele_id], T)
     note = f"imported from Android Camera2 characteristics (wide '{wide_id}', tele '{tele_id}')"
-    cal = Calibration(rig, CalibrationConditions(note=note))
+    # A fixed-focal-length camera lists one focal length: the wide's, for its focus breathing
+    # (fixes/breathing.py; a no-op until the calibration's focus distance is given).
+    f_mm = session.cameras[wide_id].available_focal_lengths
+    wide_f_mm = f_mm[0] if f_mm is not None and len(f_mm) == 1 else None
+    cal = Calibration(rig, CalibrationConditions(note=note, wide_focal_length_mm=wide_f_mm))
     manifest = Manifest(description=f"imported from Android dump '{root.name}'", captures=entries)
     dest = write_set_atomically(out, cal, manifest, images)
     return ImportResult(dest, len(entries), {"wide": wide_id, "tele": tele_id}, notes=notes)

@@ -75,6 +75,21 @@ class AndroidCharacteristics(BaseModel):
     minimum_focus_distance: float | None = Field(
         None, alias="android.lens.info.minimumFocusDistance", ge=0
     )
+    available_focal_lengths: tuple[float, ...] | None = Field(
+        None, alias="android.lens.info.availableFocalLengths"
+    )
+
+    @field_validator("available_focal_lengths", mode="before")
+    @classmethod
+    def _focal_lengths(cls, v: Any) -> tuple[float, ...] | None:
+        if v is None:
+            return None
+        vals = [v] if isinstance(v, int | float) and not isinstance(v, bool) else v
+        if not isinstance(vals, list | tuple) or not vals or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) and 0 < x < 100 for x in vals
+        ):
+            raise ValueError(f"must be focal lengths in millimetres (0–100), got {v!r}")
+        return tuple(float(x) for x in vals)
 
     @field_validator("intrinsic_calibration", mode="before")
     @classmethod
