@@ -242,3 +242,21 @@ def test_writer_writes_real_jpeg_files(tmp_path: Path) -> None:
                 colour = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
                 assert colour.ndim == 3 and colour.shape[2] == 3
                 assert np.array_equal(read_gray(path), gray_of_file(path.read_bytes()))
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG"])
+def test_vng_demosaic_is_not_shifted(pattern: str) -> None:
+    # OpenCV 4.11's VNG moves its output up by 2 rows (opencv/opencv#27225); no phone ISP does,
+    # and on random-1012 it became a +1.7 px disparity offset. A textured scene through the
+    # ISP with VNG must land where the same scene through bilinear demosaicing lands: the
+    # best integer shift between them is (0, 0) and the sub-pixel residual is < 0.15 px.
+    rng = np.random.default_rng(3)
+    tex = cv2.GaussianBlur(rng.uniform(0.1, 0.9, (160, 160)).astype(np.float32), (0, 0), 3.0)
+    out = {
+        m: _gray(tex, noise=False, cfa_pattern=pattern, demosaic=m, **PLAIN)[20:-20, 20:-20]
+        for m in ("bilinear", "vng")
+    }
+    a = out["bilinear"].astype(np.float32)
+    b = out["vng"].astype(np.float32)
+    (dx, dy), _ = cv2.phaseCorrelate(a, b)
+    assert abs(dy) < 0.15 and abs(dx) < 0.15, (dx, dy)

@@ -23,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import cv2
@@ -145,11 +146,41 @@ def _raw(
     return out
 
 
+@functools.lru_cache(maxsize=8)
+def _vng_shift(pattern: str) -> tuple[int, int]:
+    """The integer (rows, columns) by which this OpenCV's VNG output is shifted against the
+    mosaic, measured once on a smooth random texture against bilinear demosaicing.
+
+    OpenCV 4.11's VNG moves its output up by 2 rows (opencv/opencv#27225, fixed upstream by
+    #27226); no phone ISP does that, and the simulator would hand the flows a constant offset
+    (random-1009, -1011, -1012: +0.3 … +1.7 px). Measured rather than assumed, so a fixed
+    OpenCV gives (0, 0)."""
+    rng = np.random.default_rng(0)
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (96, 96)).astype(np.float32), (0, 0), 2.5)
+    mosaic = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    ref = cv2.demosaicing(mosaic, _DEMOSAIC_CODES[(pattern, "bilinear")])[..., 1].astype(np.float32)
+    vng = cv2.demosaicing(mosaic, _DEMOSAIC_CODES[(pattern, "vng")])[..., 1].astype(np.float32)
+    best, arg = -np.inf, (0, 0)
+    for dy in range(-3, 4):
+        for dx in range(-3, 4):
+            a = ref[8:-8, 8:-8]
+            b = vng[8 + dy : 88 + dy, 8 + dx : 88 + dx]
+            c = float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
+            if c > best:
+                best, arg = c, (dy, dx)
+    return arg
+
+
 def _demosaic(mosaic: NDArray[np.uint16], isp: IspSpec) -> F32:
     """OpenCV demosaicing of the uint16 mosaic → linear BGR float32 in [0, 1]."""
     code = _DEMOSAIC_CODES[(isp.cfa_pattern, isp.demosaic)]
     if isp.demosaic == "vng":  # OpenCV's VNG takes 8-bit input only
         bgr8 = cv2.demosaicing(cv2.convertScaleAbs(mosaic, alpha=255 / (_CODES - 1)), code)
+        dy, dx = _vng_shift(isp.cfa_pattern)
+        if dy or dx:  # undo this OpenCV's shift (edge rows/columns replicated)
+            bgr8 = cv2.warpAffine(bgr8, np.float32([[1, 0, -dx], [0, 1, -dy]]),
+                                  (bgr8.shape[1], bgr8.shape[0]), flags=cv2.INTER_NEAREST,
+                                  borderMode=cv2.BORDER_REPLICATE)
         return bgr8.astype(np.float32) * np.float32(1 / 255)
     bgr16 = cv2.demosaicing(mosaic, code)
     return bgr16.astype(np.float32) * np.float32(1 / (_CODES - 1))
