@@ -178,7 +178,8 @@ def _demosaic(mosaic: NDArray[np.uint16], isp: IspSpec) -> F32:
         bgr8 = cv2.demosaicing(cv2.convertScaleAbs(mosaic, alpha=255 / (_CODES - 1)), code)
         dy, dx = _vng_shift(isp.cfa_pattern)
         if dy or dx:  # undo this OpenCV's shift (edge rows/columns replicated)
-            bgr8 = cv2.warpAffine(bgr8, np.float32([[1, 0, -dx], [0, 1, -dy]]),
+            shift = np.array([[1, 0, -dx], [0, 1, -dy]], dtype=np.float32)
+            bgr8 = cv2.warpAffine(bgr8, shift,
                                   (bgr8.shape[1], bgr8.shape[0]), flags=cv2.INTER_NEAREST,
                                   borderMode=cv2.BORDER_REPLICATE)
         return bgr8.astype(np.float32) * np.float32(1 / 255)
