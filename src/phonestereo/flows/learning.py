@@ -143,20 +143,17 @@ class LearningResult:
         }
 
 
-def _wt_box(ref: Rectification, size: tuple[int, int]) -> tuple[int, int, int, int] | None:
-    """The raw-wide box of the face captures' W-T scale fit: everything the tele sees.
+def _wt_box(ref: Rectification) -> tuple[int, int, int, int] | None:
+    """The raw-wide box of the face captures' W-T scale fit: everything the tele sees
+    (:func:`~phonestereo.flows.roi_disparity.tele_view_box`, inside the wide image).
 
     The scale is read from e across the disparity axis, so its error is the matches' e error
     over their lever (the box's height in tele pixels). The faces' own box (a row of faces, a
     small lever) scattered the scale by 0.15 % on a ×3.5 periscope (random-1000), ±0.5 px in
     single face observations; the tele's whole view, 0.04 % (docs/module-random.md).
     """
-    tx, ty, tw, th = tele_view_box(ref)
-    x0, y0 = max(int(tx), 0), max(int(ty), 0)
-    x1, y1 = min(int(tx + tw), size[0] - 1), min(int(ty + th), size[1] - 1)
-    if x1 - x0 < 32 or y1 - y0 < 32:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
+    box = tele_view_box(ref)
+    return box if min(box[2], box[3]) >= 32 else None
 
 
 def learn_face_capture(
@@ -204,7 +201,7 @@ def learn_face_capture(
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
                                time.perf_counter() - t0)
     if config.wt_scale:
-        box = _wt_box(rect, rig.wide.size)
+        box = _wt_box(rect)
         wt = None
         why = "the tele's view is not inside the wide image"
         if box is not None:
