@@ -10,7 +10,7 @@ window when the floor says the pair is compression-limited (``MatchConfig.wide_f
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,7 @@ F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 
-__all__ = ["Fit", "NoiseModel", "first_fit", "fit_windows", "scaled"]
+__all__ = ["Fit", "NoiseModel", "Windows", "first_fit", "fit_windows", "scaled"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,30 @@ class NoiseModel:
     pixel: tuple[float, float]
     input: tuple[float, float]
     shift: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class Windows:
+    """The N matched windows to fit: the images, the integer matches and the window size."""
+
+    #: The left image, shape (H, W), float32.
+    left: F32
+    #: B-spline coefficients of the right image, shape (H, W), float32.
+    coef: F32
+    #: Integer left-window centres, shape (N, 2).
+    xy: Any
+    #: Disparities the search found, shape (N,), px.
+    d0: F64
+    #: Row errors the search found, shape (N,), px.
+    e0: F64
+    #: Window half-size, px.
+    radius: int
+    #: σ of the window's Gaussian weight, px.
+    sigma_w: float
+
+    def take(self, idx: Any) -> Windows:
+        """The windows ``idx`` of these (same images and window size)."""
+        return replace(self, xy=np.asarray(self.xy)[idx], d0=self.d0[idx], e0=self.e0[idx])
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,27 +80,19 @@ def scaled(pair: tuple[float, float], k: float) -> tuple[float, float]:
 
 
 def fit_windows(
-    left: F32,
-    coef: F32,
-    xy: Any,
-    d0: F64,
-    e0: F64,
-    r: int,
-    sigma_w: float,
-    nm: NoiseModel,
-    cfg: MatchConfig,
-    correlated: bool = False,
+    win: Windows, nm: NoiseModel, cfg: MatchConfig, correlated: bool = False
 ) -> Fit:
     """The sub-pixel fit of the windows, the noise cap and the pair's misfit floor."""
+    d0, e0 = win.d0, win.e0
     ref = refine_lk(
-        left,
+        win.left,
         None,  # the template gradients are filtered from the left windows directly
-        coef,
-        xy,
+        win.coef,
+        win.xy,
         d0,
         e0,
-        radius=r,
-        sigma_w=sigma_w,
+        radius=win.radius,
+        sigma_w=win.sigma_w,
         slant=cfg.slant,
         max_slant=cfg.max_slant,
         max_iter=cfg.max_iter,
@@ -120,16 +136,7 @@ PROBE_MARGIN = 2.0
 
 
 def first_fit(
-    left: F32,
-    coef: F32,
-    xy: Any,
-    d0: F64,
-    e0: F64,
-    r: int,
-    sigma_w: float,
-    nm: NoiseModel,
-    cfg: MatchConfig,
-    correlated: bool = False,
+    win: Windows, nm: NoiseModel, cfg: MatchConfig, correlated: bool = False
 ) -> tuple[Fit, bool]:
     """The first fit of the windows and whether the pair is compression-limited (refit wide).
 
@@ -139,16 +146,14 @@ def first_fit(
     ``wide_floor`` decides alone (rendered phone JPEGs read 12-145 against 5), anything else
     fits all windows as before. The returned fit is then the probe's (it is discarded).
     """
-    can_widen = cfg.misfit_floor and cfg.wide_radius > r
-    n = len(xy)
+    can_widen = cfg.misfit_floor and cfg.wide_radius > win.radius
+    n = len(win.xy)
     if can_widen and n >= 2 * PROBE_WINDOWS:
         sub = np.linspace(0, n - 1, PROBE_WINDOWS).round().astype(np.int64)
-        probe = fit_windows(
-            left, coef, np.asarray(xy)[sub], d0[sub], e0[sub], r, sigma_w, nm, cfg, correlated
-        )
+        probe = fit_windows(win.take(sub), nm, cfg, correlated)
         if probe.floor >= PROBE_MARGIN * cfg.wide_floor:
             return probe, True
-    fit = fit_windows(left, coef, xy, d0, e0, r, sigma_w, nm, cfg, correlated)
+    fit = fit_windows(win, nm, cfg, correlated)
     return fit, bool(can_widen and fit.floor >= cfg.wide_floor)
 
 

@@ -46,7 +46,7 @@ from phonestereo.features.cfa import cfa_phase_contrast, shift_noise_factor, sup
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
-from phonestereo.features.match_fit import NoiseModel, first_fit, fit_windows, scaled
+from phonestereo.features.match_fit import NoiseModel, Windows, first_fit, fit_windows, scaled
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
 from phonestereo.features.misfit import (
     correlation_factor,
@@ -185,8 +185,8 @@ def match_rectified(
     coef = right_prep.result()[1] if added[1] == 0 and not cfa else bspline_coefficients(rc)
     models = NoiseModel(noise, noise_in, shift_noise)
     corr = cfg.correlated_misfit
-    fit, wide = first_fit(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w, models, cfg,
-                          corr)
+    fit, wide = first_fit(Windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w),
+                          models, cfg, corr)
     if wide:  # compression-limited: a larger window, the quantiser's high frequencies damped
         l_wide, gain = gaussian_blur(lc, cfg.wide_prefilter_px)
         r_wide = gaussian_blur(rc, cfg.wide_prefilter_px)[0]
@@ -206,18 +206,11 @@ def match_rectified(
         # its pooled autocorrelation, not as if the 23 × 23 pixels were independent (not after
         # a blur equalisation, whose even misfit the autocorrelation would read as noise)
         corr = corr or (cfg.wide_correlated and added == (0.0, 0.0))
-        fit = fit_windows(
-            l_wide,
-            bspline_coefficients(r_wide),
-            xy[idx],
-            s.d0[idx],
-            s.e0[idx],
-            r,
+        wide_windows = Windows(
+            l_wide, bspline_coefficients(r_wide), xy[idx], s.d0[idx], s.e0[idx], r,
             cfg.wide_sigma_w,
-            models,
-            cfg,
-            corr,
         )
+        fit = fit_windows(wide_windows, models, cfg, corr)
     ref, ok, floor, nbound = fit.ref, fit.ok.copy(), fit.floor, fit.nbound
     noise, shift_noise, noise_var = fit.noise, fit.shift_noise, fit.noise_var
     counts["subpixel"] = int(ok.sum())

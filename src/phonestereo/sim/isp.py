@@ -192,24 +192,16 @@ def _tone(lin: F32, gamma: float) -> F32:
     return out
 
 
-def process(
-    radiance: Any,
-    isp: IspSpec,
-    sensor: SensorModel,
-    rng: np.random.Generator,
-    noise: bool = True,
-) -> U8:
-    """Every ISP stage but the JPEG encoder: radiance (H, W) → 8-bit BGR (H, W, 3).
+def process(mosaic: NDArray[np.uint16], isp: IspSpec, sensor: SensorModel) -> U8:
+    """Every ISP stage after the sensor's and before the JPEG encoder: the white-balanced
+    mosaic (H, W) of :func:`_raw` → 8-bit BGR (H, W, 3).
 
-    Parameters are those of :func:`apply_isp`. Luma is processed at full resolution, chroma
-    at half resolution (as phone ISPs and JPEG's 4:2:0 do; chroma is linear in the toned RGB,
-    so area-downsampling the RGB first gives the same chroma).
+    ``isp`` and ``sensor`` are those of :func:`apply_isp`. Luma is processed at full
+    resolution, chroma at half resolution (as phone ISPs and JPEG's 4:2:0 do; chroma is linear
+    in the toned RGB, so area-downsampling the RGB first gives the same chroma).
     """
-    rad = np.asarray(radiance, dtype=np.float32)
-    if rad.ndim != 2:
-        raise ShapeError(f"radiance must be a 2-D (H, W) image, got shape {rad.shape}")
-    h, w = rad.shape
-    lin = _demosaic(_raw(rad, isp, sensor, rng, noise), isp)
+    h, w = mosaic.shape
+    lin = _demosaic(mosaic, isp)
     if isp.ccm_strength > 0:
         lin = cv2.transform(lin, _ccm(isp.ccm_strength))
     tone = _tone(lin, isp.tone_gamma)
@@ -244,7 +236,10 @@ def isp_file(
     Parameters are those of :func:`apply_isp`. The suffix is ``".jpg"`` or ``".png"`` (when
     ``isp.jpeg_quality`` is None).
     """
-    bgr = process(radiance, isp, sensor, rng, noise)
+    rad = np.asarray(radiance, dtype=np.float32)
+    if rad.ndim != 2:
+        raise ShapeError(f"radiance must be a 2-D (H, W) image, got shape {rad.shape}")
+    bgr = process(_raw(rad, isp, sensor, rng, noise), isp, sensor)
     if isp.jpeg_quality is None:
         ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 3])
         suffix = ".png"
