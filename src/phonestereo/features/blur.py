@@ -334,21 +334,20 @@ class EqualisedPair:
 def equalise_pair(
     left: F32,
     right: F32,
-    xy: I64,
-    d0: F64,
-    e0: F64,
+    est: BlurEstimate,
     noise: tuple[float, float],
     *,
     min_misfit: float = 1.0,
 ) -> EqualisedPair:
-    """Blur the sharper image of a matched pair by the relative blur (:func:`relative_blur`).
+    """Blur the sharper image of a matched pair by its relative blur.
 
     Parameters
     ----------
     left, right : ndarray, shape (H, W), float32
         Rectified pair, DN.
-    xy, d0, e0 : ndarray
-        Matched windows of the NCC search (see :func:`relative_blur`).
+    est : BlurEstimate
+        The pair's relative blur, :func:`relative_blur` of the matched windows of the NCC
+        search.
     noise : (float, float)
         Per-pixel white-noise σ of left and right, DN.
     min_misfit : float
@@ -359,7 +358,6 @@ def equalise_pair(
     -------
     EqualisedPair
     """
-    est = relative_blur(left, right, xy, d0, e0, noise)
     s = abs(est.sigma)
     if not (est.misfit_ratio >= min_misfit and s > 0):
         return EqualisedPair(left, right, (0.0, 0.0), noise, noise, est)

@@ -41,7 +41,12 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
 from phonestereo.features._threads import background
-from phonestereo.features.blur import equalise_pair, gaussian_blur, gaussian_kernel
+from phonestereo.features.blur import (
+    equalise_pair,
+    gaussian_blur,
+    gaussian_kernel,
+    relative_blur,
+)
 from phonestereo.features.cfa import cfa_phase_contrast, shift_noise_factor, suppress_cfa
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
@@ -173,9 +178,8 @@ def match_rectified(
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
     added, shift_noise, noise_in = (0.0, 0.0), noise, noise
     if cfg.equalise_blur:  # after the search: its windows tell the pair's relative blur
-        eq = equalise_pair(
-            lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise, min_misfit=cfg.min_blur_misfit
-        )
+        est = relative_blur(lc, rc, xy[idx], s.d0[idx], s.e0[idx], noise)
+        eq = equalise_pair(lc, rc, est, noise, min_misfit=cfg.min_blur_misfit)
         lc, rc, added, noise, shift_noise = eq.left, eq.right, eq.added, eq.noise, eq.shift_noise
     cfa = cfg.cfa_filter and all(cfa_phase_contrast(im) >= cfg.min_cfa for im in (lc, rc))
     if cfa:  # both on their sensor grids: the CFA carriers would pull d to even values
