@@ -12,48 +12,40 @@ from phonestereo.geometry import Camera, Transform
 
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
-    """What a calibration found and how well.
+    """What a calibration found and how well."""
 
-    Attributes
-    ----------
-    cameras : tuple of Camera
-        One camera (mono) or (wide, tele).
-    T_tele_wide : Transform or None
-        Stereo extrinsics (None for mono).
-    board_poses : tuple of Transform
-        ``T_cam0_board`` per view.
-    parameter_names : tuple of str
-    parameters, covariance : ndarray, shapes (P,), (P, P)
-        Covariance = σ² (JᵀJ)⁻¹ over the inliers, σ the fitted per-coordinate noise.
-    residuals : ndarray, shape (M, 2)
-        Predicted − observed pixels for every observed point.
-    image_points : ndarray, shape (M, 2)
-        The observed pixels (x, y) themselves, in the same order (for residual plots).
-    camera_index, view_index, ids : ndarray, shape (M,)
-    inliers : ndarray of bool, shape (M,)
-    rms_px_per_point : float
-        sqrt(mean |r|²) over the inliers (OpenCV's figure).
-    rms_px_per_coordinate : float
-        sqrt(mean r²) over inlier coordinates (mrcal's figure) = per-point / √2.
-    seconds : float
-        Wall time of the solve, initialisation included.
-    """
-
+    #: tuple of Camera. One camera (mono) or (wide, tele).
     cameras: tuple[Camera, ...]
+    #: Stereo extrinsics (None for mono).
     T_tele_wide: Transform | None
+    #: tuple of Transform. ``T_cam0_board`` per view.
     board_poses: tuple[Transform, ...]
+    #: tuple of str.
     parameter_names: tuple[str, ...]
+    #: ``parameters``, ``covariance``: ndarray, shapes (P,), (P, P). Covariance = σ² (JᵀJ)⁻¹ over
+    #: the inliers, σ the fitted per-coordinate noise.
     parameters: np.ndarray
+    #: See ``parameters`` above.
     covariance: np.ndarray
+    #: ndarray, shape (M, 2). Predicted − observed pixels for every observed point.
     residuals: np.ndarray
+    #: ndarray, shape (M, 2). The observed pixels (x, y) themselves, in the same order (for residual
+    #: plots).
     image_points: np.ndarray
+    #: ``camera_index``, ``view_index``, ``ids``: ndarray, shape (M,)
     camera_index: np.ndarray
+    #: See ``camera_index`` above.
     view_index: np.ndarray
+    #: See ``camera_index`` above.
     ids: np.ndarray
+    #: ndarray of bool, shape (M,)
     inliers: np.ndarray
+    #: sqrt(mean |r|²) over the inliers (OpenCV's figure).
     rms_px_per_point: float
+    #: sqrt(mean r²) over inlier coordinates (mrcal's figure) = per-point / √2.
     rms_px_per_coordinate: float
     rounds: int
+    #: Wall time of the solve, initialisation included.
     seconds: float
 
     @property

@@ -36,23 +36,15 @@ DENSE_LIMIT = 40_000_000  # Jacobian entries below which the dense solver is use
 
 @dataclass(frozen=True)
 class CalibrationOptions:
-    """How to calibrate.
+    """How to calibrate."""
 
-    Attributes
-    ----------
-    model : str
-        Lens model name (``opencv5``, ``opencv8``, ``radial-odd``).
-    n_radial : int
-        Radial terms of ``radial-odd``.
-    reject_outliers : bool
-        Iterative outlier rejection (on by default, like mrcal).
-    max_rounds : int
-        Cap on rejection rounds.
-    """
-
+    #: Lens model name (``opencv5``, ``opencv8``, ``radial-odd``).
     model: str = "opencv5"
+    #: Radial terms of ``radial-odd``.
     n_radial: int = 6
+    #: Iterative outlier rejection (on by default, like mrcal).
     reject_outliers: bool = True
+    #: Cap on rejection rounds.
     max_rounds: int = 10
 
 

@@ -12,24 +12,17 @@ from phonestereo.errors import InputError, ShapeError
 
 @dataclass(frozen=True, eq=False)
 class BoardView:
-    """Labelled corners of one board in one image.
+    """Labelled corners of one board in one image."""
 
-    Parameters
-    ----------
-    object_points : array_like, shape (N, 3)
-        Corner positions in the board frame, metres (z = 0 for a flat board; the three-plane
-        chart of §1.3.2 has three planes in one board frame).
-    image_points : array_like, shape (N, 2)
-        Detected pixels (x, y) of the same corners.
-    ids : array_like of int, shape (N,)
-        Corner identifiers, shared between cameras so wide↔tele pairs are matched by id.
-    name : str
-        Where the view came from (file name), used in messages.
-    """
-
+    #: array_like, shape (N, 3). Corner positions in the board frame, metres (z = 0 for a flat
+    #: board; the three-plane chart of §1.3.2 has three planes in one board frame).
     object_points: np.ndarray
+    #: array_like, shape (N, 2). Detected pixels (x, y) of the same corners.
     image_points: np.ndarray
+    #: array_like of int, shape (N,). Corner identifiers, shared between cameras so wide↔tele pairs
+    #: are matched by id.
     ids: np.ndarray
+    #: Where the view came from (file name), used in messages.
     name: str = ""
 
     def __post_init__(self) -> None:

@@ -33,13 +33,6 @@ PAPER_WHITE = 0.95
 class Keypoints:
     """Named ground-truth points of a chart.
 
-    Parameters
-    ----------
-    ids : array_like of int, shape (N, k)
-        Integer labels of each point, e.g. (row, col) of a chessboard corner or (face, eye).
-    uv : array_like of float, shape (N, 2)
-        Chart-plane positions, metres (u right, v down from the top-left corner).
-
     Examples
     --------
     >>> kp = Keypoints([[0, 0], [0, 1]], [[0.05, 0.05], [0.075, 0.05]])
@@ -47,7 +40,11 @@ class Keypoints:
     (2, 0.025)
     """
 
+    #: array_like of int, shape (N, k). Integer labels of each point, e.g. (row, col) of a
+    #: chessboard corner or (face, eye).
     ids: IntArray
+    #: array_like of float, shape (N, 2). Chart-plane positions, metres (u right, v down from the
+    #: top-left corner).
     uv: Array
 
     def __post_init__(self) -> None:

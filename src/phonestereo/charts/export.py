@@ -33,29 +33,19 @@ _LUT_LEVELS = 65536  # reflectance quantised to 1/65535 before the 8-bit print l
 
 @dataclass(frozen=True, eq=False)
 class PrintedChart:
-    """What an export wrote.
+    """What an export wrote."""
 
-    Attributes
-    ----------
-    path : Path
-        The file written.
-    chart_size_m : (float, float)
-        (width, height) of the chart on the page, metres.
-    page_size_m : (float, float)
-        (width, height) of the page: the chart plus the strip below it, metres.
-    strip_m : float
-        Height of the scale-bar strip, metres (0 for PNG).
-    raster_dpi : float or None
-        Resolution of the embedded raster, dots per inch; None if drawn as vectors only.
-    parameters : dict
-        The chart's parameters (JSON-friendly).
-    """
-
+    #: The file written.
     path: Path
+    #: (float, float). (width, height) of the chart on the page, metres.
     chart_size_m: tuple[float, float]
+    #: (float, float). (width, height) of the page: the chart plus the strip below it, metres.
     page_size_m: tuple[float, float]
+    #: Height of the scale-bar strip, metres (0 for PNG).
     strip_m: float
+    #: Resolution of the embedded raster, dots per inch; None if drawn as vectors only.
     raster_dpi: float | None
+    #: dict. The chart's parameters (JSON-friendly).
     parameters: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:

@@ -43,23 +43,15 @@ IPD_M = 0.063
 
 @dataclass(frozen=True, eq=False)
 class Portrait:
-    """One shipped portrait and its located eyes (pixels, docs/conventions.md).
+    """One shipped portrait and its located eyes (pixels, docs/conventions.md)."""
 
-    Attributes
-    ----------
-    name : str
-        File name in ``charts/data/faces``.
-    size : (int, int)
-        (width, height) in pixels.
-    pupils_px : ndarray, shape (2, 2)
-        Iris centres (x, y), eye 0 on the image left.
-    eye_contours_px : ndarray, shape (2, 2)
-        Centroids of the eye-contour landmarks (x, y), same eye order.
-    """
-
+    #: File name in ``charts/data/faces``.
     name: str
+    #: (int, int). (width, height) in pixels.
     size: tuple[int, int]
+    #: ndarray, shape (2, 2). Iris centres (x, y), eye 0 on the image left.
     pupils_px: Array
+    #: ndarray, shape (2, 2). Centroids of the eye-contour landmarks (x, y), same eye order.
     eye_contours_px: Array
 
     @property
@@ -110,23 +102,6 @@ def portrait_reflectance(name: str) -> Array:
 class FaceChart:
     """A grid of real portraits, every one scaled to the same IPD (thesis §2.2).
 
-    Parameters
-    ----------
-    grid : (int, int)
-        Cells (cols, rows); faces fill them row by row.
-    cell_m : float
-        Side of a square cell, metres.
-    ipd_m : float
-        Pupil-to-pupil distance of every face on the chart, metres (thesis: 63 mm).
-    gap_m : float
-        Grey border kept free inside each cell, metres (faces never touch).
-    eye_height : float
-        Height of the eye midpoint as a fraction of the cell, from its top.
-    background : float
-        Reflectance of the mid-grey background (0.2 ≈ an 18 % grey card on paper).
-    faces : tuple of str
-        Portrait file names in cell order; empty: all shipped portraits, repeated if needed.
-
     Examples
     --------
     >>> chart = FaceChart()                                  # 4 × 2 faces, 1.3 × 0.65 m
@@ -137,12 +112,20 @@ class FaceChart:
     True
     """
 
+    #: (int, int). Cells (cols, rows); faces fill them row by row.
     grid: tuple[int, int] = (4, 2)
+    #: Side of a square cell, metres.
     cell_m: float = 0.325
+    #: Pupil-to-pupil distance of every face on the chart, metres (thesis: 63 mm).
     ipd_m: float = IPD_M
+    #: Grey border kept free inside each cell, metres (faces never touch).
     gap_m: float = 0.01
+    #: Height of the eye midpoint as a fraction of the cell, from its top.
     eye_height: float = 0.42
+    #: Reflectance of the mid-grey background (0.2 ≈ an 18 % grey card on paper).
     background: float = 0.2
+    #: tuple of str. Portrait file names in cell order; empty: all shipped portraits, repeated if
+    #: needed.
     faces: tuple[str, ...] = ()
     name: str = "faces"
     _scale: Array = field(init=False, repr=False)

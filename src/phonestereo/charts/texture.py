@@ -30,19 +30,6 @@ _MAX_TEXELS = 40_000_000
 class TexturedPlane:
     """A planar object covered by a smooth random texture.
 
-    Parameters
-    ----------
-    size_m : (float, float)
-        (width, height) of the plane, metres.
-    seed : int
-        Random seed; the same seed gives the same texture.
-    feature_m : float
-        Typical blob size, metres (Gaussian low-pass σ = feature_m / 4).
-    contrast : float
-        Approximate standard deviation of the reflectance (mean 0.5, range (0.05, 0.95)).
-    name : str
-        Short name.
-
     Examples
     --------
     >>> plane = TexturedPlane((0.5, 0.4), seed=3, feature_m=0.01)
@@ -51,10 +38,15 @@ class TexturedPlane:
     True
     """
 
+    #: (float, float). (width, height) of the plane, metres.
     size_m: tuple[float, float] = (1.0, 1.0)
+    #: Random seed; the same seed gives the same texture.
     seed: int = 0
+    #: Typical blob size, metres (Gaussian low-pass σ = feature_m / 4).
     feature_m: float = 0.01
+    #: Approximate standard deviation of the reflectance (mean 0.5, range (0.05, 0.95)).
     contrast: float = 0.2
+    #: Short name.
     name: str = "texture"
     _coeffs: Array = field(init=False, repr=False)
 

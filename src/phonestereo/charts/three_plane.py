@@ -47,23 +47,15 @@ PLANE_NAMES: tuple[str, ...] = ("left", "right", "floor")
 
 @dataclass(frozen=True, eq=False)
 class ChartPlane:
-    """One flat board of the three-plane chart.
+    """One flat board of the three-plane chart."""
 
-    Attributes
-    ----------
-    name : str
-        ``"left"``, ``"right"`` or ``"floor"``.
-    board : Chessboard
-        The printed board (its own chart frame: origin top-left, u right, v down).
-    T_chart_plane : Transform
-        Maps the board's frame into the three-plane chart frame (metres).
-    id_offset : int
-        Added to ``row·cols + col`` to make the corner ids unique over the chart.
-    """
-
+    #: ``"left"``, ``"right"`` or ``"floor"``.
     name: str
+    #: The printed board (its own chart frame: origin top-left, u right, v down).
     board: Chessboard
+    #: Maps the board's frame into the three-plane chart frame (metres).
     T_chart_plane: Transform
+    #: Added to ``row·cols + col`` to make the corner ids unique over the chart.
     id_offset: int
 
     def corner_ids(self) -> IntArray:
@@ -91,17 +83,6 @@ def _rot_x(angle: float) -> Array:
 class ThreePlaneChart:
     """Three chessboards in one rigid frame: the thesis's single-shot calibration chart (§1.3.2).
 
-    Parameters
-    ----------
-    square_m : float
-        Square side of all three boards, metres (each board has a one-square white margin).
-    wall_deg : float
-        Yaw of each wall towards the viewer, degrees (0: one flat board; < 80).
-    floor_deg : float
-        Pitch of the floor towards the viewer, degrees (< 80).
-    gap_m : float
-        Clearance between the boards' outlines (seen from the front), metres.
-
     Examples
     --------
     >>> chart = ThreePlaneChart()               # 12 mm squares: fits the x3 tele at 0.65 m
@@ -111,9 +92,13 @@ class ThreePlaneChart:
     True
     """
 
+    #: Square side of all three boards, metres (each board has a one-square white margin).
     square_m: float = 0.012
+    #: Yaw of each wall towards the viewer, degrees (0: one flat board; < 80).
     wall_deg: float = 35.0
+    #: Pitch of the floor towards the viewer, degrees (< 80).
     floor_deg: float = 45.0
+    #: Clearance between the boards' outlines (seen from the front), metres.
     gap_m: float = 0.006
     name: str = "three-plane"
     _planes: tuple[ChartPlane, ...] = field(init=False, repr=False)

@@ -57,29 +57,21 @@ _PAIR_LAYOUT = (
 
 @dataclass(frozen=True, eq=False)
 class CirclePair:
-    """Two equal circles that anchor the chessboard labels.
+    """Two equal circles that anchor the chessboard labels."""
 
-    Attributes
-    ----------
-    name : str
-        ``"h_dark"``, ``"v_light"``, ``"v_dark"`` or ``"h_light"``.
-    centers_uv : ndarray, shape (2, 2)
-        Circle centres (u, v), metres; the first is the top/left one.
-    radius_m : float
-        Circle radius, metres.
-    polarity : {"dark", "light"}
-        ``"dark"``: black circles in white squares; ``"light"``: white circles in black squares.
-    axis : {"h", "v"}
-        ``"h"``: the circles share a row (two columns apart); ``"v"``: they share a column.
-    square_ids : ndarray of int, shape (2, 2)
-        (row, col) of the square that holds each circle.
-    """
-
+    #: ``"h_dark"``, ``"v_light"``, ``"v_dark"`` or ``"h_light"``.
     name: str
+    #: ndarray, shape (2, 2). Circle centres (u, v), metres; the first is the top/left one.
     centers_uv: Array
+    #: Circle radius, metres.
     radius_m: float
+    #: {"dark", "light"}. ``"dark"``: black circles in white squares; ``"light"``: white circles in
+    #: black squares.
     polarity: Literal["dark", "light"]
+    #: {"h", "v"}. ``"h"``: the circles share a row (two columns apart); ``"v"``: they share a
+    #: column.
     axis: Literal["h", "v"]
+    #: ndarray of int, shape (2, 2). (row, col) of the square that holds each circle.
     square_ids: IntArray = field(default_factory=lambda: np.zeros((2, 2), dtype=np.int64))
 
     def __post_init__(self) -> None:
@@ -210,18 +202,6 @@ def _board_block(
 class Chessboard:
     """A plain chessboard, for the OpenCV sample set and multi-pose calibration.
 
-    Parameters
-    ----------
-    pattern : (int, int)
-        Inner corners (cols, rows), as OpenCV's ``patternSize``; the board has
-        (cols + 1) × (rows + 1) squares.
-    square_m : float
-        Square side, metres.
-    margin_m : float
-        White border around the squares, metres.
-    black, white : float
-        Reflectance of the black squares and of the paper.
-
     Examples
     --------
     >>> board = Chessboard((9, 6), square_m=0.025, margin_m=0.0)
@@ -229,10 +209,16 @@ class Chessboard:
     ((10, 7), (0.25, 0.175), 54)
     """
 
+    #: (int, int). Inner corners (cols, rows), as OpenCV's ``patternSize``; the board has (cols + 1)
+    #: × (rows + 1) squares.
     pattern: tuple[int, int] = (9, 6)
+    #: Square side, metres.
     square_m: float = 0.025
+    #: White border around the squares, metres.
     margin_m: float = 0.025
+    #: ``black``, ``white``: Reflectance of the black squares and of the paper.
     black: float = INK_BLACK
+    #: See ``black`` above.
     white: float = PAPER_WHITE
     name: str = "chessboard"
     _codes: NDArray[np.int8] = field(init=False, repr=False)
@@ -280,17 +266,6 @@ class Chessboard:
 class VerificationChart:
     """The thesis's verification chart: a chessboard with four circle pairs (§1.2.2, §2.2).
 
-    Parameters
-    ----------
-    squares : (int, int)
-        Number of squares (cols, rows); at least (10, 8) so the pairs fit with a ring around.
-    square_m : float
-        Square side, metres.
-    margin_m : float
-        White border around the squares, metres.
-    black, white : float
-        Reflectance of the black squares and of the paper.
-
     Examples
     --------
     >>> chart = VerificationChart()           # 40 × 28 squares of 25 mm
@@ -300,10 +275,16 @@ class VerificationChart:
     ['h_dark', 'v_light', 'v_dark', 'h_light']
     """
 
+    #: (int, int). Number of squares (cols, rows); at least (10, 8) so the pairs fit with a ring
+    #: around.
     squares: tuple[int, int] = (40, 28)
+    #: Square side, metres.
     square_m: float = 0.025
+    #: White border around the squares, metres.
     margin_m: float = 0.025
+    #: ``black``, ``white``: Reflectance of the black squares and of the paper.
     black: float = INK_BLACK
+    #: See ``black`` above.
     white: float = PAPER_WHITE
     name: str = "verification"
     _codes: NDArray[np.int8] = field(init=False, repr=False)

@@ -26,33 +26,27 @@ MIN_CORNERS = 4  # fewest corners seen in both images for a capture to count as 
 
 @dataclass(frozen=True)
 class CaptureMeasurement:
-    """Matched chart corners of one capture, rectified.
+    """Matched chart corners of one capture, rectified."""
 
-    Attributes
-    ----------
-    id : str
-        Capture id.
-    time_s, temperature_c : float, float or None
-        From the manifest.
-    found : bool
-        False when the chart was not measured (``reason`` says why).
-    ids : (N, 2) int64
-        Chart (row, col) of each matched corner.
-    q_wide, q_tele : (N, 2) float64
-        Detected corner pixels in the wide and the tele image.
-    d_px, e_px : (N,) float64
-        Rectified disparity and non-disparity error, pixels.
-    """
-
+    #: Capture id.
     id: str
+    #: ``time_s``, ``temperature_c``: float, float or None. From the manifest.
     time_s: float
+    #: See ``time_s`` above.
     temperature_c: float | None
+    #: False when the chart was not measured (``reason`` says why).
     found: bool
     reason: str
+    #: (N, 2) int64. Chart (row, col) of each matched corner.
     ids: np.ndarray
+    #: ``q_wide``, ``q_tele``: (N, 2) float64. Detected corner pixels in the wide and the tele
+    #: image.
     q_wide: F64
+    #: See ``q_wide`` above.
     q_tele: F64
+    #: ``d_px``, ``e_px``: (N,) float64. Rectified disparity and non-disparity error, pixels.
     d_px: F64
+    #: See ``d_px`` above.
     e_px: F64
 
 

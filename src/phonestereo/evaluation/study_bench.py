@@ -45,36 +45,26 @@ Bench = Callable[[ModuleSpec, int, Any], dict[str, Any]]
 
 @dataclass(frozen=True)
 class AnalyticBenchConfig:
-    """The verification half of the thesis bench, analytically (no images).
+    """The verification half of the thesis bench, analytically (no images)."""
 
-    Attributes
-    ----------
-    distances_m : tuple of float
-        Chart distances, metres.
-    attempts : int
-        Captures per distance (manual refocus attempts).
-    focus_m : float
-        Manual focus distance, metres.
-    start_s, attempt_s : float
-        Time of the first capture (heated) and the spacing between captures, seconds.
-    handheld : bool
-        Hand shake on every capture.
-    grid : (int, int)
-        Chart points (columns, rows).
-    field : float
-        Fraction of the tele's field of view the grid spans (the wide sees it all).
-    tilt_deg : float
-        1σ chart tilt about x and y, degrees.
-    """
-
+    #: tuple of float. Chart distances, metres.
     distances_m: tuple[float, ...] = (0.8, 1.2, 1.6, 2.0, 2.4, 2.8, 3.2, 3.6, 4.0)
+    #: Captures per distance (manual refocus attempts).
     attempts: int = 1
+    #: Manual focus distance, metres.
     focus_m: float = 1.5
+    #: ``start_s``, ``attempt_s``: Time of the first capture (heated) and the spacing between
+    #: captures, seconds.
     start_s: float = 300.0
+    #: See ``start_s`` above.
     attempt_s: float = 10.0
+    #: Hand shake on every capture.
     handheld: bool = True
+    #: (int, int). Chart points (columns, rows).
     grid: tuple[int, int] = (9, 7)
+    #: Fraction of the tele's field of view the grid spans (the wide sees it all).
     field: float = 0.6
+    #: 1σ chart tilt about x and y, degrees.
     tilt_deg: float = 4.0
 
     def __post_init__(self) -> None:

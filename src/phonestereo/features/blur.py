@@ -158,33 +158,26 @@ def _log_power_table(size: int) -> F64:
 
 @dataclass(frozen=True)
 class BlurEstimate:
-    """Relative blur of a matched pair (:func:`relative_blur`).
+    """Relative blur of a matched pair (:func:`relative_blur`)."""
 
-    Attributes
-    ----------
-    sigma : float
-        Signed σ of the sampled Gaussian (:func:`gaussian_blur`) that equalises the pair, px:
-        > 0 blur the right image (the left is blurrier), < 0 blur the left; 0 when no blur
-        reduces the misfit.
-    misfit_ratio : float
-        The window misfit that this blur removes, in units of the pair's noise variance
-        (σ_L² + a²σ_R² per pixel): what the blur difference adds to a fitted window's residual
-        variance. The matcher's residual test keeps windows up to 16 noise variances.
-    shift_noise_factor : float
-        ρ = Σ |H|²·|f|²·S / Σ |f|²·S over the equalised windows' signal spectrum S: the variance
-        factor of the blurred image's noise *as seen by the window shift* (the Jacobian is a
-        gradient, so its spectrum weights |f|²·S). The per-pixel factor Σ k² = mean |H|² is far
-        smaller: blurred noise is correlated, and most of what is left of it sits at the low
-        frequencies where the gradient is, so a white-noise Cramér–Rao bound with the
-        per-pixel σ would be too small.
-    windows, bins : int
-        Windows and frequency bins used.
-    """
-
+    #: Signed σ of the sampled Gaussian (:func:`gaussian_blur`) that equalises the pair, px: > 0
+    #: blur the right image (the left is blurrier), < 0 blur the left; 0 when no blur reduces the
+    #: misfit.
     sigma: float
+    #: The window misfit that this blur removes, in units of the pair's noise variance (σ_L² +
+    #: a²σ_R² per pixel): what the blur difference adds to a fitted window's residual variance. The
+    #: matcher's residual test keeps windows up to 16 noise variances.
     misfit_ratio: float
+    #: ρ = Σ |H|²·|f|²·S / Σ |f|²·S over the equalised windows' signal spectrum S: the variance
+    #: factor of the blurred image's noise *as seen by the window shift* (the Jacobian is a
+    #: gradient, so its spectrum weights |f|²·S). The per-pixel factor Σ k² = mean |H|² is far
+    #: smaller: blurred noise is correlated, and most of what is left of it sits at the low
+    #: frequencies where the gradient is, so a white-noise Cramér–Rao bound with the per-pixel σ
+    #: would be too small.
     shift_noise_factor: float
+    #: ``windows``, ``bins``: Windows and frequency bins used.
     windows: int
+    #: See ``windows`` above.
     bins: int
 
 
@@ -305,28 +298,21 @@ def relative_blur(
 
 @dataclass(frozen=True, eq=False)
 class EqualisedPair:
-    """A pair after :func:`equalise_pair`.
+    """A pair after :func:`equalise_pair`."""
 
-    Attributes
-    ----------
-    left, right : ndarray, shape (H, W), float32
-        The pair, the sharper one blurred (or both unchanged).
-    added : (float, float)
-        Gaussian σ added to left and right, px (one of them 0).
-    noise : (float, float)
-        Per-pixel noise σ of the returned images, DN (the input σ times Σ k² on the blurred
-        side): what the residual of a fitted window is compared with.
-    shift_noise : (float, float)
-        The σ of white noise that would disturb a window's shift as much as the returned
-        images' noise does, DN (the input σ times √ρ on the blurred side,
-        :attr:`BlurEstimate.shift_noise_factor`): what the Cramér–Rao σ_d uses.
-    estimate : BlurEstimate
-    """
-
+    #: ``left``, ``right``: ndarray, shape (H, W), float32. The pair, the sharper one blurred (or
+    #: both unchanged).
     left: F32
+    #: See ``left`` above.
     right: F32
+    #: (float, float). Gaussian σ added to left and right, px (one of them 0).
     added: tuple[float, float]
+    #: (float, float). Per-pixel noise σ of the returned images, DN (the input σ times Σ k² on the
+    #: blurred side): what the residual of a fitted window is compared with.
     noise: tuple[float, float]
+    #: (float, float). The σ of white noise that would disturb a window's shift as much as the
+    #: returned images' noise does, DN (the input σ times √ρ on the blurred side,
+    #: :attr:`BlurEstimate.shift_noise_factor`): what the Cramér–Rao σ_d uses.
     shift_noise: tuple[float, float]
     estimate: BlurEstimate
 

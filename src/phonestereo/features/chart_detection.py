@@ -17,53 +17,39 @@ from phonestereo.features._image import F64
 
 @dataclass(frozen=True, eq=False)
 class ChartDetection:
-    """Labelled corners of a verification chart, or the reason there are none.
-
-    Attributes
-    ----------
-    found : bool
-    reason : str
-        Empty when found (or a note on dropped corners); otherwise what went wrong.
-    ids : ndarray of int, shape (N, 2)
-        Chart (row, col) of each corner (:meth:`VerificationChart.corner_ids` convention).
-    points : ndarray, shape (N, 2)
-        Sub-pixel corner positions (x, y), pixels of the full image.
-    quality : ndarray, shape (N,)
-        Saddle strength √(−det H) of the refined corner, intensity units per px² (higher is
-        sharper; compare corners of one image).
-    pairs_found : tuple of str
-        Names of the circle pairs whose two circles were seen in the lattice.
-    rotation_deg : float
-        In-image angle of the chart's rows (+u axis), degrees from +x towards +y: the angle of
-        the sum of the vectors from each corner to its right neighbour (NaN if not found).
-    stages : dict
-        Counts per stage (circle candidates, pairs, Harris candidates, lattice nodes, squares,
-        dropped corners, pyramid levels).
-    seconds : dict
-        Wall time per stage.
-    circles : dict of str to ndarray, shape (2, 2)
-        Pixel centres (x, y) of the circles of each pair found, in the order of
-        :attr:`CirclePair.centers_uv` (the squares' centres, from the labelled lattice).
-    residual_px : ndarray, shape (N,)
-        Distance of each corner from the quadratic fitted to its 5 × 5 neighbourhood, pixels
-        (noise level ~0.01–0.05 px; corners above 0.15 px are dropped); NaN where the
-        neighbourhood is too small (chart border, image edge).
-    sigma_px : ndarray, shape (N,)
-        Predicted position σ per coordinate from the image noise, pixels
-        (``features.saddle.position_covariance``).
-    """
+    """Labelled corners of a verification chart, or the reason there are none."""
 
     found: bool
+    #: Empty when found (or a note on dropped corners); otherwise what went wrong.
     reason: str
+    #: ndarray of int, shape (N, 2). Chart (row, col) of each corner
+    #: (:meth:`VerificationChart.corner_ids` convention).
     ids: NDArray[np.int64]
+    #: ndarray, shape (N, 2). Sub-pixel corner positions (x, y), pixels of the full image.
     points: F64
+    #: ndarray, shape (N,). Saddle strength √(−det H) of the refined corner, intensity units per px²
+    #: (higher is sharper; compare corners of one image).
     quality: F64
+    #: tuple of str. Names of the circle pairs whose two circles were seen in the lattice.
     pairs_found: tuple[str, ...] = ()
+    #: In-image angle of the chart's rows (+u axis), degrees from +x towards +y: the angle of the
+    #: sum of the vectors from each corner to its right neighbour (NaN if not found).
     rotation_deg: float = float("nan")
+    #: dict. Counts per stage (circle candidates, pairs, Harris candidates, lattice nodes, squares,
+    #: dropped corners, pyramid levels).
     stages: dict[str, Any] = field(default_factory=dict)
+    #: dict. Wall time per stage.
     seconds: dict[str, float] = field(default_factory=dict)
+    #: dict of str to ndarray, shape (2, 2). Pixel centres (x, y) of the circles of each pair found,
+    #: in the order of :attr:`CirclePair.centers_uv` (the squares' centres, from the labelled
+    #: lattice).
     circles: dict[str, F64] = field(default_factory=dict)
+    #: ndarray, shape (N,). Distance of each corner from the quadratic fitted to its 5 × 5
+    #: neighbourhood, pixels (noise level ~0.01–0.05 px; corners above 0.15 px are dropped); NaN
+    #: where the neighbourhood is too small (chart border, image edge).
     residual_px: F64 = field(default_factory=lambda: np.zeros(0))
+    #: ndarray, shape (N,). Predicted position σ per coordinate from the image noise, pixels
+    #: (``features.saddle.position_covariance``).
     sigma_px: F64 = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:

@@ -31,27 +31,20 @@ SEARCH_SIDE_PX = 1000
 
 @dataclass(frozen=True, eq=False)
 class ChessboardDetection:
-    """Corners of a plain chessboard, or the reason there are none.
-
-    Attributes
-    ----------
-    found : bool
-    reason : str
-        Empty when found; otherwise what went wrong, for the user.
-    points : ndarray, shape (N, 2)
-        Refined corners, row-major (id = row·cols + col) like OpenCV's object points.
-    ids : ndarray of int, shape (N,)
-    quality : ndarray, shape (N,)
-        Saddle strength per corner (intensity / px²).
-    sigma_px : ndarray, shape (N,)
-        Predicted position σ per coordinate from the image noise (``SaddleCorners.sigma_px``).
-    """
+    """Corners of a plain chessboard, or the reason there are none."""
 
     found: bool
+    #: Empty when found; otherwise what went wrong, for the user.
     reason: str
+    #: ndarray, shape (N, 2). Refined corners, row-major (id = row·cols + col) like OpenCV's object
+    #: points.
     points: np.ndarray
+    #: ndarray of int, shape (N,)
     ids: np.ndarray
+    #: ndarray, shape (N,). Saddle strength per corner (intensity / px²).
     quality: np.ndarray
+    #: ndarray, shape (N,). Predicted position σ per coordinate from the image noise
+    #: (``SaddleCorners.sigma_px``).
     sigma_px: np.ndarray
 
 

@@ -37,32 +37,22 @@ _RING = 1.35  # enclosure ring, in circle radii
 
 @dataclass(frozen=True, eq=False)
 class Circles:
-    """Circle candidates of one pyramid level, in level-0 pixels.
+    """Circle candidates of one pyramid level, in level-0 pixels."""
 
-    Attributes
-    ----------
-    centers : ndarray, shape (N, 2)
-        Blob centroids (x, y), level-0 px.
-    cov : ndarray, shape (N, 2, 2)
-        Second central moments of the blob area, level-0 px² (a disc of radius r: r²/4 · I).
-    dark : ndarray of bool, shape (N,)
-        True for dark circles (in white squares).
-    contrast : ndarray, shape (N,)
-        |ring − centre| intensity difference.
-    pairs : ndarray of int, shape (M, 2)
-        Indices of paired candidates, best pair first.
-    pair_score : ndarray, shape (M,)
-        Misfit of each pair (0 = ideal).
-    level : int
-        The pyramid level they were found on.
-    """
-
+    #: ndarray, shape (N, 2). Blob centroids (x, y), level-0 px.
     centers: F64
+    #: ndarray, shape (N, 2, 2). Second central moments of the blob area, level-0 px² (a disc of
+    #: radius r: r²/4 · I).
     cov: F64
+    #: ndarray of bool, shape (N,). True for dark circles (in white squares).
     dark: NDArray[np.bool_]
+    #: ndarray, shape (N,). |ring − centre| intensity difference.
     contrast: F64
+    #: ndarray of int, shape (M, 2). Indices of paired candidates, best pair first.
     pairs: NDArray[np.intp]
+    #: ndarray, shape (M,). Misfit of each pair (0 = ideal).
     pair_score: F64
+    #: The pyramid level they were found on.
     level: int
 
     @property

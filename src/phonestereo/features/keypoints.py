@@ -26,17 +26,11 @@ DETECTORS = ("dog", "sift")
 
 @dataclass(frozen=True, eq=False)
 class Keypoints:
-    """Integer-pixel keypoints, strongest first.
+    """Integer-pixel keypoints, strongest first."""
 
-    Attributes
-    ----------
-    xy : ndarray, shape (N, 2), float64
-        (x, y) pixels (integers stored as float).
-    response : ndarray, shape (N,)
-        |DoG| at the extremum (DN), or the SIFT response.
-    """
-
+    #: ndarray, shape (N, 2), float64. (x, y) pixels (integers stored as float).
     xy: F64
+    #: ndarray, shape (N,). |DoG| at the extremum (DN), or the SIFT response.
     response: F64
 
     def __len__(self) -> int:

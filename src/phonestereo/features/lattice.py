@@ -57,33 +57,25 @@ _QSIGN = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)  # TL,
 
 @dataclass(frozen=True, eq=False)
 class Lattice:
-    """Labelled chessboard nodes of one image, in lattice indices (see module docstring).
+    """Labelled chessboard nodes of one image, in lattice indices (see module docstring)."""
 
-    Attributes
-    ----------
-    ij : ndarray of int, shape (N, 2)
-        Lattice (i, j) of each node.
-    points : ndarray, shape (N, 2)
-        Node positions (x, y), pixels of ``level`` (Harris-peak accuracy, ~0.2 px).
-    e1, e2 : ndarray, shape (N, 2)
-        Local lattice steps along j and i at each node, pixels of ``level``.
-    contrast : ndarray, shape (N,)
-        Dark/light difference of the crossing check, intensity units.
-    parity : int
-        Lattice square (i, j) is black iff (i + j + parity) is even.
-    level : int
-        Pyramid level of the coordinates.
-    candidates : int
-        Harris candidates considered.
-    """
-
+    #: ndarray of int, shape (N, 2). Lattice (i, j) of each node.
     ij: NDArray[np.int64]
+    #: ndarray, shape (N, 2). Node positions (x, y), pixels of ``level`` (Harris-peak accuracy, ~0.2
+    #: px).
     points: F64
+    #: ``e1``, ``e2``: ndarray, shape (N, 2). Local lattice steps along j and i at each node, pixels
+    #: of ``level``.
     e1: F64
+    #: See ``e1`` above.
     e2: F64
+    #: ndarray, shape (N,). Dark/light difference of the crossing check, intensity units.
     contrast: F64
+    #: Lattice square (i, j) is black iff (i + j + parity) is even.
     parity: int
+    #: Pyramid level of the coordinates.
     level: int
+    #: Harris candidates considered.
     candidates: int
 
 

@@ -21,17 +21,11 @@ _CUT_MEAN = float(np.sqrt(2 / np.pi) * (1 - np.exp(-(1.959964**2) / 2)) / 0.95)
 
 @dataclass(frozen=True)
 class NoiseLevel:
-    """σ²(I) = offset + slope · I, intensity units² (I in the image's units).
+    """σ²(I) = offset + slope · I, intensity units² (I in the image's units)."""
 
-    Attributes
-    ----------
-    offset : float
-        Variance at zero intensity (read noise, quantisation), ≥ 0.
-    slope : float
-        Variance per unit intensity (shot noise), ≥ 0.
-    """
-
+    #: Variance at zero intensity (read noise, quantisation), ≥ 0.
     offset: float
+    #: Variance per unit intensity (shot noise), ≥ 0.
     slope: float
 
     def variance(self, intensity: np.ndarray | float) -> np.ndarray:

@@ -28,31 +28,22 @@ from phonestereo.features.noise_level import NoiseLevel, estimate_noise_level
 
 @dataclass(frozen=True, eq=False)
 class SaddleCorners:
-    """Refined corners and how trustworthy each is.
+    """Refined corners and how trustworthy each is."""
 
-    Attributes
-    ----------
-    points : ndarray, shape (N, 2)
-        Refined (x, y) pixels; the input position where the fit failed.
-    ok : ndarray of bool, shape (N,)
-        The fit converged to a saddle (opposite-sign curvatures) within the window.
-    saddle_strength : ndarray, shape (N,)
-        √(−det H) of the fitted Hessian, in intensity units per px²; low for weak or blurred
-        corners.
-    shift_px : ndarray, shape (N,)
-        Distance moved from the starting point.
-    covariance_px2 : ndarray, shape (N, 2, 2)
-        Predicted covariance of each point from the image noise (first order through the fit,
-        see :func:`position_covariance`), px²; NaN where the fit failed.
-    noise : NoiseLevel
-        The image's noise level used for it (σ² = a + b·I, at each corner's intensity).
-    """
-
+    #: ndarray, shape (N, 2). Refined (x, y) pixels; the input position where the fit failed.
     points: np.ndarray
+    #: ndarray of bool, shape (N,). The fit converged to a saddle (opposite-sign curvatures) within
+    #: the window.
     ok: np.ndarray
+    #: ndarray, shape (N,). √(−det H) of the fitted Hessian, in intensity units per px²; low for
+    #: weak or blurred corners.
     saddle_strength: np.ndarray
+    #: ndarray, shape (N,). Distance moved from the starting point.
     shift_px: np.ndarray
+    #: ndarray, shape (N, 2, 2). Predicted covariance of each point from the image noise (first
+    #: order through the fit, see :func:`position_covariance`), px²; NaN where the fit failed.
     covariance_px2: np.ndarray
+    #: The image's noise level used for it (σ² = a + b·I, at each corner's intensity).
     noise: NoiseLevel
 
     @property

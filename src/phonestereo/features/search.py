@@ -33,34 +33,28 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True, eq=False)
 class SearchResult:
-    """Integer NCC search for N keypoints (NaN / False where the band left the image).
+    """Integer NCC search for N keypoints (NaN / False where the band left the image)."""
 
-    Attributes
-    ----------
-    searched : ndarray of bool, shape (N,)
-        The band fit in the images and had room for a parabola.
-    d0, e0 : ndarray, shape (N,)
-        Disparity and non-disparity error at the peak, parabola-refined, px.
-    score : ndarray, shape (N,)
-        NCC at the peak.
-    second : ndarray, shape (N,)
-        Best NCC in the band more than ``exclusion`` px (in x) from the peak.
-    curvature_x, curvature_y : ndarray, shape (N,)
-        −second differences of the NCC at the peak along x and y (NCC per px²).
-    at_edge : ndarray of bool, shape (N,)
-        The peak is on the border of the band (disparity or row range too small).
-    lr_ok : ndarray of bool, shape (N,)
-        Left–right consistency holds.
-    """
-
+    #: ndarray of bool, shape (N,). The band fit in the images and had room for a parabola.
     searched: NDArray[np.bool_]
+    #: ``d0``, ``e0``: ndarray, shape (N,). Disparity and non-disparity error at the peak,
+    #: parabola-refined, px.
     d0: F64
+    #: See ``d0`` above.
     e0: F64
+    #: ndarray, shape (N,). NCC at the peak.
     score: F64
+    #: ndarray, shape (N,). Best NCC in the band more than ``exclusion`` px (in x) from the peak.
     second: F64
+    #: ``curvature_x``, ``curvature_y``: ndarray, shape (N,). −second differences of the NCC at the
+    #: peak along x and y (NCC per px²).
     curvature_x: F64
+    #: See ``curvature_x`` above.
     curvature_y: F64
+    #: ndarray of bool, shape (N,). The peak is on the border of the band (disparity or row range
+    #: too small).
     at_edge: NDArray[np.bool_]
+    #: ndarray of bool, shape (N,). Left–right consistency holds.
     lr_ok: NDArray[np.bool_]
 
 

@@ -78,21 +78,6 @@ class RadialResidualFix:
     Model: e = o + û_y·P(r) over rectified wide pixels (module docstring). Build it with
     :meth:`fit` (or :meth:`from_rectification`); apply with :meth:`correct` / :meth:`apply`.
 
-    Attributes
-    ----------
-    center_px : (float, float)
-        Distortion centre in rectified pixels (the wide's principal point, rectified).
-    offset_px : float
-        o: the constant non-disparity offset, px.
-    coefficients : tuple of float
-        a₁..aₙ of P(r) = Σ aₖ (r/ρ)ᵏ, px.
-    radius_scale_px : float
-        ρ: the largest radius in the fit, px (keeps the fit well conditioned).
-    rms_before_px, rms_after_px : float
-        RMS of e − mean(e) and of the fit residual over the points used, px.
-    n_used, n_total : int
-        Points kept after robust rejection, points given.
-
     Examples
     --------
     A residual radial error P(r) = 0.2·(r/400)² px and a 0.3 px offset, seen through e only:
@@ -106,13 +91,23 @@ class RadialResidualFix:
     (0.3, 0.2, 0.0)
     """
 
+    #: (float, float). Distortion centre in rectified pixels (the wide's principal point,
+    #: rectified).
     center_px: tuple[float, float]
+    #: o: the constant non-disparity offset, px.
     offset_px: float
+    #: tuple of float. a₁..aₙ of P(r) = Σ aₖ (r/ρ)ᵏ, px.
     coefficients: tuple[float, ...]
+    #: ρ: the largest radius in the fit, px (keeps the fit well conditioned).
     radius_scale_px: float
+    #: ``rms_before_px``, ``rms_after_px``: RMS of e − mean(e) and of the fit residual over the
+    #: points used, px.
     rms_before_px: float
+    #: See ``rms_before_px`` above.
     rms_after_px: float
+    #: ``n_used``, ``n_total``: Points kept after robust rejection, points given.
     n_used: int
+    #: See ``n_used`` above.
     n_total: int
 
     @staticmethod

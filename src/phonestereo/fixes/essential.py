@@ -84,31 +84,22 @@ def decompose_essential(E: Any, R_hint: Any, t_hint: Any) -> tuple[Array, Array]
 # --- the variants ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class FocusScales:
-    """Per-camera focal scales and principal-point offsets of one attempt, from one variant.
+    """Per-camera focal scales and principal-point offsets of one attempt, from one variant."""
 
-    Attributes
-    ----------
-    variant : {"eq9", "E", "Om", "OmT", "optimal", "none"}
-    with_offset : bool
-    s_wide, s_tele : float
-        f_cur / f_ref per camera (NaN when not ok).
-    offset_wide_px, offset_tele_px : (float, float)
-        c_cur − c_ref per camera, pixels.
-    condition : float
-        Condition number of the solved system (∞: unknowns not separable by these residuals).
-    residual : float
-        RMS residual at the solution (units of the variant's residuals).
-    ok : bool
-    reason : str
-    """
-
+    #: {"eq9", "E", "Om", "OmT", "optimal", "none"}.
     variant: str
     with_offset: bool
+    #: ``s_wide``, ``s_tele``: f_cur / f_ref per camera (NaN when not ok).
     s_wide: float
+    #: See ``s_wide`` above.
     s_tele: float
+    #: ``offset_wide_px``, ``offset_tele_px``: (float, float). c_cur − c_ref per camera, pixels.
     offset_wide_px: tuple[float, float]
+    #: See ``offset_wide_px`` above.
     offset_tele_px: tuple[float, float]
+    #: Condition number of the solved system (∞: unknowns not separable by these residuals).
     condition: float
+    #: RMS residual at the solution (units of the variant's residuals).
     residual: float
     ok: bool = True
     reason: str = ""

@@ -49,27 +49,18 @@ PLANE_RMS_PX = 0.5  # tele pixels: matches this close to one homography come fro
 
 @dataclass(frozen=True)
 class EssentialEstimate:
-    """E, R, t between the cameras of one capture, from matched pixels (nominal calibration).
+    """E, R, t between the cameras of one capture, from matched pixels (nominal calibration)."""
 
-    Attributes
-    ----------
-    E : (3, 3) float64
-        E′ for normalised undistorted coordinates of the nominal K, unit Frobenius norm (rank 2;
-        an exact essential matrix only in the homography case).
-    R, t : (3, 3), (3,) float64
-        Its decomposition nearest the hint (t a unit vector).
-    method : {"8-point", "homography"}
-    plane_rms_px : float
-        RMS tele-pixel transfer error of the best single homography (small: a planar scene).
-    n : int
-    ok : bool
-    reason : str
-    """
-
+    #: (3, 3) float64. E′ for normalised undistorted coordinates of the nominal K, unit Frobenius
+    #: norm (rank 2; an exact essential matrix only in the homography case).
     E: Array
+    #: ``R``, ``t``: (3, 3), (3,) float64. Its decomposition nearest the hint (t a unit vector).
     R: Array
+    #: See ``R`` above.
     t: Array
+    #: {"8-point", "homography"}.
     method: str
+    #: RMS tele-pixel transfer error of the best single homography (small: a planar scene).
     plane_rms_px: float
     n: int
     ok: bool = True

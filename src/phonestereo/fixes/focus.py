@@ -72,25 +72,6 @@ def _robust_linear(A: Array, b: Array, f_scale: float) -> tuple[Array, Array, fl
 class ScaleOffset:
     """``q' = s·(q − c) + c + o``: an isotropic scale about ``c`` plus an offset (pixels).
 
-    Attributes
-    ----------
-    scale : float
-        s (1 = no change).
-    offset_px : (2,) float64
-        o, pixels.
-    center_px : (2,) float64
-        c, pixels (the camera's principal point).
-    sigma_scale : float
-        1σ of s (0 for an exact/constructed transform).
-    sigma_offset_px : (2,) float64
-        1σ of o.
-    rms_px : float
-        RMS residual of the fit over its inliers (per coordinate).
-    n : int
-        Point pairs used.
-    ok : bool
-        False when the data could not give the fit (``reason``).
-
     Examples
     --------
     >>> t = ScaleOffset(1.001, np.array([0.5, 0.0]), np.array([1000.0, 750.0]))
@@ -100,13 +81,21 @@ class ScaleOffset:
     [[10.0, 20.0]]
     """
 
+    #: s (1 = no change).
     scale: float
+    #: (2,) float64. o, pixels.
     offset_px: Array
+    #: (2,) float64. c, pixels (the camera's principal point).
     center_px: Array
+    #: 1σ of s (0 for an exact/constructed transform).
     sigma_scale: float = 0.0
+    #: (2,) float64. 1σ of o.
     sigma_offset_px: Array = field(default_factory=lambda: np.zeros(2))
+    #: RMS residual of the fit over its inliers (per coordinate).
     rms_px: float = 0.0
+    #: Point pairs used.
     n: int = 0
+    #: False when the data could not give the fit (``reason``).
     ok: bool = True
     reason: str = ""
 

@@ -39,36 +39,30 @@ _N_TAU_GRID = 200
 
 @dataclass(frozen=True)
 class DriftFit:
-    """The warm-up curve y(t) = offset + amplitude · (1 − e^(−t/τ)) fitted to a series.
+    """The warm-up curve y(t) = offset + amplitude · (1 − e^(−t/τ)) fitted to a series."""
 
-    Attributes
-    ----------
-    ok : bool
-        False when the series cannot give τ; ``reason`` says why (or notes, e.g. unsaturated).
-    reason : str
-    amplitude, tau_s, offset : float
-        A (total drift cold → warm, unit of the values: px for disparity), τ (s), c (y at t = 0).
-    sigma : float
-        RMS residual of the fit (unit of the values).
-    tau_sigma_s, amplitude_sigma : float
-        1σ uncertainties from the fit's Jacobian.
-    saturation_fraction, saturation_time_s : float
-        Fraction f of the drift that counts as saturated (0.95) and the time it is reached,
-        τ · ln(1 / (1 − f)) (3 τ for 95 %).
-    n : int
-        Number of finite samples used.
-    """
-
+    #: False when the series cannot give τ; ``reason`` says why (or notes, e.g. unsaturated).
     ok: bool
     reason: str
+    #: ``amplitude``, ``tau_s``, ``offset``: A (total drift cold → warm, unit of the values: px for
+    #: disparity), τ (s), c (y at t = 0).
     amplitude: float
+    #: See ``amplitude`` above.
     tau_s: float
+    #: See ``amplitude`` above.
     offset: float
+    #: RMS residual of the fit (unit of the values).
     sigma: float
+    #: ``tau_sigma_s``, ``amplitude_sigma``: 1σ uncertainties from the fit's Jacobian.
     tau_sigma_s: float
+    #: See ``tau_sigma_s`` above.
     amplitude_sigma: float
+    #: ``saturation_fraction``, ``saturation_time_s``: Fraction f of the drift that counts as
+    #: saturated (0.95) and the time it is reached, τ · ln(1 / (1 − f)) (3 τ for 95 %).
     saturation_fraction: float
+    #: See ``saturation_fraction`` above.
     saturation_time_s: float
+    #: Number of finite samples used.
     n: int
 
     def value(self, t_s: Any) -> F64:

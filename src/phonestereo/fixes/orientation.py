@@ -115,30 +115,19 @@ def capture_bucket(gravity: Any = None, orientation: str | None = None) -> str:
 
 @dataclass(frozen=True)
 class BucketOffset:
-    """The disparity offset learned in one orientation bucket (a lookup result).
-
-    Attributes
-    ----------
-    bucket : str
-    found : bool
-        False when nothing was learned in this bucket (``reason`` says so).
-    reason : str
-    offset_px : float
-        Mean of d_measured − d_expected over the bucket's samples, pixels (NaN if not found).
-    sigma_px : float
-        1σ of that mean (standard error; ∞ with a single sample).
-    spread_px : float
-        Standard deviation of the single samples, pixels.
-    n : int
-        Samples used.
-    """
+    """The disparity offset learned in one orientation bucket (a lookup result)."""
 
     bucket: str
+    #: False when nothing was learned in this bucket (``reason`` says so).
     found: bool
     reason: str
+    #: Mean of d_measured − d_expected over the bucket's samples, pixels (NaN if not found).
     offset_px: float
+    #: 1σ of that mean (standard error; ∞ with a single sample).
     sigma_px: float
+    #: Standard deviation of the single samples, pixels.
     spread_px: float
+    #: Samples used.
     n: int
 
     def to_dict(self) -> dict[str, Any]:

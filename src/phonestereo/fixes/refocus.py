@@ -77,23 +77,15 @@ def sharpness(image: Any, roi: tuple[int, int, int, int] | None = None) -> float
 
 @dataclass(frozen=True)
 class FocusVerdict:
-    """Focus-fail decision of one capture of a stack.
+    """Focus-fail decision of one capture of a stack."""
 
-    Attributes
-    ----------
-    sharpness : float
-        The capture's focus metric (:func:`sharpness`).
-    relative : float
-        Sharpness / the stack's median sharpness.
-    failed : bool
-        True when ``relative`` < the threshold (the capture missed focus).
-    reason : str
-        Why it failed (empty when it did not).
-    """
-
+    #: The capture's focus metric (:func:`sharpness`).
     sharpness: float
+    #: Sharpness / the stack's median sharpness.
     relative: float
+    #: True when ``relative`` < the threshold (the capture missed focus).
     failed: bool
+    #: Why it failed (empty when it did not).
     reason: str = ""
 
     def to_dict(self) -> dict[str, Any]:
@@ -236,33 +228,23 @@ def averaging_trials(d_stack: Any, n: int, trials: int = 200, seed: int = 0) -> 
 
 @dataclass(frozen=True)
 class FlatSceneScale:
-    """Result of the flat-scene method (§3.5.2): homography, residual distortion, W-T scale.
+    """Result of the flat-scene method (§3.5.2): homography, residual distortion, W-T scale."""
 
-    Attributes
-    ----------
-    homography : (3, 3) float64
-        H mapping rectified tele pixels onto rectified wide pixels (RANSAC, cv2).
-    radial_coeffs : (k,) float64
-        Residual radial distortion of the tele after H: Δ(u) = u·Σ a_j ρ^(2j), ρ = |u|/r_ref,
-        u = q_tele − c, pixels.
-    r_ref_px : float
-        Radius normalising ρ (the largest |u|), pixels.
-    rms_h_px, rms_residual_px : float
-        RMS of q_wide − H(q_tele) before and after the residual-distortion fit (inliers).
-    wt : WTScale
-        The W-T scale fitted on the tele points corrected for residual distortion only.
-    inliers : int
-        Homography inliers.
-    ok : bool
-    reason : str
-    """
-
+    #: (3, 3) float64. H mapping rectified tele pixels onto rectified wide pixels (RANSAC, cv2).
     homography: Array
+    #: (k,) float64. Residual radial distortion of the tele after H: Δ(u) = u·Σ a_j ρ^(2j), ρ =
+    #: |u|/r_ref, u = q_tele − c, pixels.
     radial_coeffs: Array
+    #: Radius normalising ρ (the largest |u|), pixels.
     r_ref_px: float
+    #: ``rms_h_px``, ``rms_residual_px``: RMS of q_wide − H(q_tele) before and after the
+    #: residual-distortion fit (inliers).
     rms_h_px: float
+    #: See ``rms_h_px`` above.
     rms_residual_px: float
+    #: The W-T scale fitted on the tele points corrected for residual distortion only.
     wt: WTScale
+    #: Homography inliers.
     inliers: int
     ok: bool = True
     reason: str = ""

@@ -43,18 +43,6 @@ F64 = np.ndarray
 class TranslationComponents:
     """The tele optical centre in the rotation-only rectified frame (thesis Figure 3-8).
 
-    Attributes
-    ----------
-    baseline_m : float
-        B: the component along the disparity axis (rectified x).
-    non_baseline_m : float
-        t_y: along the non-disparity axis (rectified y).
-    z_m : float
-        t_z: along the optical axis (positive: tele in front of the wide).
-    tilt_deg : float
-        Angle between the full baseline and the rectified x axis: how far ``canonical``
-        turns the rectified frame.
-
     Examples
     --------
     The folded ×3 module: tele 12 mm below the wide, 0.4 mm to the side, 1.5 mm in front of the
@@ -71,9 +59,14 @@ class TranslationComponents:
     7.37
     """
 
+    #: B: the component along the disparity axis (rectified x).
     baseline_m: float
+    #: t_y: along the non-disparity axis (rectified y).
     non_baseline_m: float
+    #: t_z: along the optical axis (positive: tele in front of the wide).
     z_m: float
+    #: Angle between the full baseline and the rectified x axis: how far ``canonical`` turns the
+    #: rectified frame.
     tilt_deg: float
 
     @classmethod
@@ -131,33 +124,22 @@ class TranslationFit:
 
     The last term is a tele/wide scale difference (focus breathing, §3.5: e ≈ s·v at every
     depth), fitted so that it is not mistaken for t_z.
-
-    Attributes
-    ----------
-    ok : bool
-        False when the scene cannot separate the terms (``reason`` says why).
-    reason : str
-    ty_over_b : float
-        α = t_y / B.
-    tz_over_b : float
-        −β = t_z / B.
-    offset_px : float
-        o, px.
-    scale : float
-        s, the relative scale difference (0 when not fitted).
-    rms_px : float
-        RMS of the fit residual, px.
-    n : int
-        Points used.
     """
 
+    #: False when the scene cannot separate the terms (``reason`` says why).
     ok: bool
     reason: str
+    #: α = t_y / B.
     ty_over_b: float
+    #: −β = t_z / B.
     tz_over_b: float
+    #: o, px.
     offset_px: float
+    #: s, the relative scale difference (0 when not fitted).
     scale: float
+    #: RMS of the fit residual, px.
     rms_px: float
+    #: Points used.
     n: int
 
     def to_dict(self) -> dict[str, Any]:

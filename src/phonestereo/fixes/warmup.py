@@ -28,17 +28,6 @@ class GateResult:
 class WarmupGate:
     """The "heated" gate (thesis §3.1 fix option 2, §4.1.1): warm-up time or drift rate.
 
-    Parameters
-    ----------
-    min_time_s : float or None
-        A capture passes once the camera app has run this long (the thesis uses 3 min = 180 s
-        for its folded module). Default when neither criterion is given.
-    max_drift_rate_px_per_s : float or None
-        A capture passes when the measured drift rate of a static scene (|d mean| per second,
-        :func:`drift_rate`) is at most this — or, with ``fit``, the fitted rate at its time.
-    fit : DriftFit or None
-        A drift curve of this module; gives the rate at any time when none is measured.
-
     Examples
     --------
     >>> gate = WarmupGate(min_time_s=180.0)
@@ -46,8 +35,13 @@ class WarmupGate:
     (False, True)
     """
 
+    #: A capture passes once the camera app has run this long (the thesis uses 3 min = 180 s for its
+    #: folded module). Default when neither criterion is given.
     min_time_s: float | None = None
+    #: A capture passes when the measured drift rate of a static scene (|d mean| per second,
+    #: :func:`drift_rate`) is at most this — or, with ``fit``, the fitted rate at its time.
     max_drift_rate_px_per_s: float | None = None
+    #: A drift curve of this module; gives the rate at any time when none is measured.
     fit: DriftFit | None = None
 
     def __post_init__(self) -> None:

@@ -27,32 +27,23 @@ class WTScale:
     After rectification (disparity along x), ``y_w − c_y ≈ s·(y_t − c_y) + o``; the same s
     applies along x, so the corrected tele point is ``(c_x + s·(x_t − c_x), c_y + s·(y_t −
     c_y) + o)`` and the corrected disparity ``d' = x_w − c_x − s·(x_t − c_x)``.
-
-    Attributes
-    ----------
-    scale, offset_px : float
-        s and o (pixels, non-disparity axis).
-    center_px : (2,) float64
-        The tele principal point in the rectified frame, pixels.
-    sigma_scale, sigma_offset_px : float
-        1σ of s and o.
-    rms_e_px : float
-        Spread (RMS) of e after the fix, inliers.
-    rms_e_before_px : float
-        Spread (RMS about the mean) of e before.
-    n : int
-        Points used.
-    ok : bool
-    reason : str
     """
 
+    #: ``scale``, ``offset_px``: s and o (pixels, non-disparity axis).
     scale: float
+    #: See ``scale`` above.
     offset_px: float
+    #: (2,) float64. The tele principal point in the rectified frame, pixels.
     center_px: Array
+    #: ``sigma_scale``, ``sigma_offset_px``: 1σ of s and o.
     sigma_scale: float = 0.0
+    #: See ``sigma_scale`` above.
     sigma_offset_px: float = 0.0
+    #: Spread (RMS) of e after the fix, inliers.
     rms_e_px: float = 0.0
+    #: Spread (RMS about the mean) of e before.
     rms_e_before_px: float = 0.0
+    #: Points used.
     n: int = 0
     ok: bool = True
     reason: str = ""

@@ -41,34 +41,24 @@ from phonestereo.rectification import Rectification
 
 @dataclass(frozen=True)
 class ApplicationInputs:
-    """One capture to measure.
-
-    Attributes
-    ----------
-    calibration : Calibration
-    entry : CaptureEntry
-        Its manifest entry (time, gravity, focus mode, ROI).
-    image_wide, image_tele : ndarray
-        Decoded images.
-    corrector : Corrector or None
-        The learned correction (None: no store → the learned gate fails unless the learned
-        correction is switched off).
-    roi : (x, y, w, h) or None
-        Raw wide pixels; default the entry's ROI.
-    focus : FocusCorrection or None
-        The refocus stack's correction for this attempt (Fig. 4-1).
-    reference : Rectification or None
-        The calibration's reference rectification, when the caller keeps it across captures
-        (default: built here, ~15 ms).
-    """
+    """One capture to measure."""
 
     calibration: Calibration
+    #: Its manifest entry (time, gravity, focus mode, ROI).
     entry: CaptureEntry
+    #: ``image_wide``, ``image_tele``: ndarray. Decoded images.
     image_wide: Any
+    #: See ``image_wide`` above.
     image_tele: Any
+    #: The learned correction (None: no store → the learned gate fails unless the learned correction
+    #: is switched off).
     corrector: Corrector | None = None
+    #: (x, y, w, h) or None. Raw wide pixels; default the entry's ROI.
     roi: tuple[int, int, int, int] | None = None
+    #: The refocus stack's correction for this attempt (Fig. 4-1).
     focus: FocusCorrection | None = None
+    #: The calibration's reference rectification, when the caller keeps it across captures (default:
+    #: built here, ~15 ms).
     reference: Rectification | None = None
 
 

@@ -22,31 +22,24 @@ F64 = Array
 
 @dataclass(frozen=True)
 class CoarsePeak:
-    """The whole-box correlation's answer (:func:`coarse_search`).
+    """The whole-box correlation's answer (:func:`coarse_search`)."""
 
-    Attributes
-    ----------
-    d, e : float
-        Disparity of the highest peak (sub-pixel, parabola) and its whole-pixel row offset
-        (NaN when the box cannot be correlated).
-    peak : float
-        Its ZNCC.
-    second : float
-        The best *other* candidate: a local maximum more than 2 px away, or a lobe cut by an
-        end of the searched range (−inf when none).
-    d2, e2 : float
-        Where that candidate is (whole pixels; NaN when none).
-    at_end : bool
-        The highest peak lies at an end of the searched range: the correlation may still
-        rise beyond it, so its disparity is not located.
-    """
-
+    #: ``d``, ``e``: Disparity of the highest peak (sub-pixel, parabola) and its whole-pixel row
+    #: offset (NaN when the box cannot be correlated).
     d: float
+    #: Its ZNCC.
     peak: float
+    #: See ``d`` above.
     e: float
+    #: The best *other* candidate: a local maximum more than 2 px away, or a lobe cut by an end of
+    #: the searched range (−inf when none).
     second: float = float("-inf")
+    #: ``d2``, ``e2``: Where that candidate is (whole pixels; NaN when none).
     d2: float = float("nan")
+    #: See ``d2`` above.
     e2: float = float("nan")
+    #: The highest peak lies at an end of the searched range: the correlation may still rise beyond
+    #: it, so its disparity is not located.
     at_end: bool = False
 
 
@@ -110,27 +103,21 @@ def coarse_disparity(
 
 @dataclass(frozen=True)
 class PeakContrast:
-    """Whether the first coarse peak beats the second tile by tile (:func:`peak_contrast`).
+    """Whether the first coarse peak beats the second tile by tile (:func:`peak_contrast`)."""
 
-    Attributes
-    ----------
-    t : float
-        Paired t statistic of the tiles' ZNCC differences (first − second): their
-        mean over its standard error (sd / √n), Student-t with n − 1 degrees of freedom when
-        the peaks are equally good. NaN with too few tiles.
-    n : int
-        Tiles compared.
-    zncc_first, zncc_second : float
-        Median tile ZNCC at each peak (each tile at its best shift within ±``search_px``).
-    slope : float
-        Drift of the tiles' best disparity across x at the first peak, px per px (a W-T scale
-        error of the uncorrected pair: 0.03 = the tele's scale is 3 % off).
-    """
-
+    #: Paired t statistic of the tiles' ZNCC differences (first − second): their mean over its
+    #: standard error (sd / √n), Student-t with n − 1 degrees of freedom when the peaks are equally
+    #: good. NaN with too few tiles.
     t: float
+    #: Tiles compared.
     n: int
+    #: ``zncc_first``, ``zncc_second``: Median tile ZNCC at each peak (each tile at its best shift
+    #: within ±``search_px``).
     zncc_first: float
+    #: See ``zncc_first`` above.
     zncc_second: float
+    #: Drift of the tiles' best disparity across x at the first peak, px per px (a W-T scale error
+    #: of the uncorrected pair: 0.03 = the tele's scale is 3 % off).
     slope: float
 
 

@@ -72,32 +72,21 @@ def coarse_verdict(
 
 @dataclass(frozen=True)
 class CoarseChoice:
-    """The coarse step's choice (:func:`coarse_peak`).
+    """The coarse step's choice (:func:`coarse_peak`)."""
 
-    Attributes
-    ----------
-    box : (x, y, w, h)
-        The coarse box used.
-    peak : CoarsePeak
-    contrast : PeakContrast or None
-        The tile test of its two peaks, when there were two.
-    reason : str
-        Why the ROI cannot be measured ("" when it can).
-    right : ndarray
-        The tele window the fine search must use: the input, or the input with the W-T scale
-        the tiles showed corrected (``scale``).
-    scale : float
-        That pre-correction (1.0: none).
-    tile_zncc : float
-        Median tile ZNCC at the first box's peak, when it was computed (NaN otherwise).
-    """
-
+    #: (x, y, w, h). The coarse box used.
     box: Box
     peak: CoarsePeak
+    #: The tile test of its two peaks, when there were two.
     contrast: PeakContrast | None
+    #: Why the ROI cannot be measured ("" when it can).
     reason: str
+    #: ndarray. The tele window the fine search must use: the input, or the input with the W-T scale
+    #: the tiles showed corrected (``scale``).
     right: Any
+    #: That pre-correction (1.0: none).
     scale: float = 1.0
+    #: Median tile ZNCC at the first box's peak, when it was computed (NaN otherwise).
     tile_zncc: float = float("nan")
 
 

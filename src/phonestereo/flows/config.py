@@ -37,69 +37,58 @@ FIXES = (
 
 @dataclass(frozen=True)
 class FlowConfig:
-    """Switches and parameters of the learning and application flows.
+    """Switches and parameters of the learning and application flows."""
 
-    Attributes
-    ----------
-    warmup_s : float
-        Heated gate: seconds since the camera started (thesis: ~3 min, §3.1). The default
-        180 s is tuned to the simulator presets' heating time constant τ = 70 s: 180 s ≈ 2.6 τ,
-        when 92 % of the warm-up drift has happened. A phone that heats more slowly needs
-        about 2.6 × its own τ (set it with ``--config``; docs/flow-config.md).
-    heating_gate, focus_calibration, wt_scale, canonical, orientation_buckets,
-    learned_correction, wide_breathing : bool
-        The fixes (all on by default): the warm-up gate (§3.1), the refocus-stack focus
-        calibration (Fig. 4-1, §3.5.3), the W-T scale (§3.5.1), canonical rectification
-        (§3.3; off = ``tele-to-wide``), orientation-keyed fixes (§3.4), the learned
-        correction from faces (§3.6), the wide's focus breathing between calibration and use
-        (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the calibration gives the
-        wide's physical focal length and its focus distance, else a no-op). The focus
-        calibration is off by default: on handheld stacks the same-camera scale between
-        attempts is dominated by the hand's motion, and
-        on the thesis bench it made the full flow worse on all three sets measured (median
-        0.44/0.61/0.74 % without it, 0.51/0.86/0.91 % with it); it is meant for tripod stacks.
-    lookup : str
-        One of :data:`LOOKUPS`.
-    min_observations : int
-        The learned gate: fewest observations in the capture's bucket.
-    field_max_degree : int
-        Highest polynomial degree over the sensor the smooth field may choose (0..3).
-    focal_rel_sigma : float
-        Relative σ of the wide's focal length at the working focus, a systematic part of the
-        learned correction's σ (:mod:`~phonestereo.learning.extent`).
-    max_relative_sigma : float
-        The extrapolation gate: a depth whose σ/Z exceeds this (the capture lies beyond what
-        was learned) is gated with the reason instead of answered.
-    heating_by_temperature : bool
-        When the face captures report the module temperature, learn the disparity offset per
-        °C from them (:mod:`~phonestereo.learning.heating_term`), refer the learned
-        observations to one temperature and add the term, with its σ, to every capture that
-        reports one; such captures then skip the warm-up gate (their drift is corrected, not
-        waited out). Without temperatures, a significant drift of the learned offsets over the
-        learning captures' time puts the drift still to come into σ (τ = ``warmup_s`` / 2.6).
-    face_wt_keypoints : int
-        Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele
-        shares with the wide (not the faces' box): the scale's lever is the view's height.
-    roi : RoiConfig
-        The ROI measurement's parameters. Its rectification mode and W-T switch are not in
-        it: they are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
-    """
-
+    #: Heated gate: seconds since the camera started (thesis: ~3 min, §3.1). The default 180 s is
+    #: tuned to the simulator presets' heating time constant τ = 70 s: 180 s ≈ 2.6 τ, when 92 % of
+    #: the warm-up drift has happened. A phone that heats more slowly needs about 2.6 × its own τ
+    #: (set it with ``--config``; docs/flow-config.md).
     warmup_s: float = 180.0
+    #: The fixes (all on by default; ``heating_gate`` … ``learned_correction`` here,
+    #: ``wide_breathing`` below): the warm-up gate (§3.1).
     heating_gate: bool = True
+    #: The refocus-stack focus calibration (Fig. 4-1, §3.5.3). The focus calibration is off by
+    #: default: on handheld stacks the same-camera scale between attempts is dominated by the
+    #: hand's motion, and on the thesis bench it made the full flow worse on all three sets
+    #: measured (median 0.44/0.61/0.74 % without it, 0.51/0.86/0.91 % with it); it is meant for
+    #: tripod stacks.
     focus_calibration: bool = False
+    #: The W-T scale (§3.5.1).
     wt_scale: bool = True
+    #: Canonical rectification (§3.3; off = ``tele-to-wide``).
     canonical: bool = True
+    #: Orientation-keyed fixes (§3.4).
     orientation_buckets: bool = True
+    #: The learned correction from faces (§3.6).
     learned_correction: bool = True
+    #: One of :data:`LOOKUPS`.
     lookup: str = "field"
+    #: The learned gate: fewest observations in the capture's bucket.
     min_observations: int = 10
+    #: Highest polynomial degree over the sensor the smooth field may choose (0..3).
     field_max_degree: int = 3
+    #: Relative σ of the wide's focal length at the working focus, a systematic part of the learned
+    #: correction's σ (:mod:`~phonestereo.learning.extent`).
     focal_rel_sigma: float = FOCAL_REL_SIGMA
+    #: The extrapolation gate: a depth whose σ/Z exceeds this (the capture lies beyond what was
+    #: learned) is gated with the reason instead of answered.
     max_relative_sigma: float = 0.05
+    #: When the face captures report the module temperature, learn the disparity offset per °C from
+    #: them (:mod:`~phonestereo.learning.heating_term`), refer the learned observations to one
+    #: temperature and add the term, with its σ, to every capture that reports one; such captures
+    #: then skip the warm-up gate (their drift is corrected, not waited out). Without temperatures,
+    #: a significant drift of the learned offsets over the learning captures' time puts the drift
+    #: still to come into σ (τ = ``warmup_s`` / 2.6).
     heating_by_temperature: bool = True
+    #: A fix (on by default, see ``heating_gate``): the wide's focus breathing between
+    #: calibration and use (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the
+    #: calibration gives the wide's physical focal length and its focus distance, else a no-op).
     wide_breathing: bool = True
+    #: Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele shares
+    #: with the wide (not the faces' box): the scale's lever is the view's height.
     face_wt_keypoints: int = 1500
+    #: The ROI measurement's parameters. Its rectification mode and W-T switch are not in it: they
+    #: are :attr:`mode` and :attr:`wt_scale` here, passed explicitly.
     roi: RoiConfig = field(default_factory=RoiConfig)
 
     def __post_init__(self) -> None:

@@ -45,18 +45,12 @@ Progress = Callable[[int, int, str], None]
 
 @dataclass(frozen=True)
 class IpdMode:
-    """Where the faces' depths come from (thesis §3.6, eq. 11).
+    """Where the faces' depths come from (thesis §3.6, eq. 11)."""
 
-    Attributes
-    ----------
-    kind : {"chart", "population"}
-        A printed face chart (every face the same known IPD, on one plane), or real faces
-        of unknown IPD (the prior's mean IPD, each head's own yaw).
-    ipd_m : float
-        The IPD used, metres.
-    """
-
+    #: {"chart", "population"}. A printed face chart (every face the same known IPD, on one plane),
+    #: or real faces of unknown IPD (the prior's mean IPD, each head's own yaw).
     kind: Literal["chart", "population"]
+    #: The IPD used, metres.
     ipd_m: float
 
     @classmethod

@@ -14,60 +14,51 @@ class RoiConfig:
     The rectification mode and whether the W-T scale is applied are not fields here: they are
     the flow's switches (:attr:`FlowConfig.canonical`, :attr:`FlowConfig.wt_scale`), passed
     to :func:`measure_roi` explicitly, so one configuration cannot say two things.
-
-    Attributes
-    ----------
-    expand : float
-        ROI expansion factor per side (Fig. 4-2), ≥ 1.
-    z_min_m : float
-        Nearest depth searched (sets the largest disparity).
-    majority_bin_px, majority_tol_px, majority_tol_rel : float
-        Histogram bin of the majority vote and the band kept about it (max of px, relative).
-    min_matches : int
-        Fewest matches on the surface for a measurement.
-    enough_matches : int
-        With fewer on the surface after blur equalisation, the unblurred pair is tried too.
-    map_step_px : int
-        Grid step of the window's rectification maps (exact on the grid, splines between).
-    coarse_min_zncc, fine_range_px : float, int
-        The coarse whole-box correlation must reach this ZNCC; the fine search is then
-        ±``fine_range_px`` around it (repetitive texture stays unambiguous).
-    coarse_expand, max_ambiguity : float
-        The coarse box is the ROI expanded this much; a second correlation peak (> 2 px
-        away, a separate local maximum) above ``max_ambiguity`` × the first makes the
-        measurement fail as ambiguous.
-    min_peak_t : float
-        The first coarse peak must beat the second tile by tile: the paired t of the
-        tiles' ZNCC differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach
-        this, else the measurement fails as ambiguous (a periodic texture's alias).
-    coarse_max_scale_drift_px : float
-        When the W-T scale the coarse box's tiles show moves its edges by more than this
-        against its centre, the tele window is corrected for that scale before the coarse and
-        fine steps (only with the W-T scale fix on;
-        :func:`~phonestereo.flows.coarse_gate.coarse_peak`).
-    max_band_split : float
-        The surface's matches must form one band about the plane: when the fuller side
-        beyond it (up to 3 majority tolerances) holds this many times the band's matches,
-        the measurement fails (two disparities, no single one).
-    match : MatchConfig
     """
 
+    #: ROI expansion factor per side (Fig. 4-2), ≥ 1.
     expand: float = 1.6
+    #: Nearest depth searched (sets the largest disparity).
     z_min_m: float = 0.4
+    #: ``majority_bin_px``, ``majority_tol_px``, ``majority_tol_rel``: Histogram bin of the majority
+    #: vote and the band kept about it (max of px, relative).
     majority_bin_px: float = 0.5
+    #: See ``majority_bin_px`` above.
     majority_tol_px: float = 0.75
+    #: See ``majority_bin_px`` above.
     majority_tol_rel: float = 0.04
+    #: Fewest matches on the surface for a measurement.
     min_matches: int = 12
+    #: With fewer on the surface after blur equalisation, the unblurred pair is tried too.
     enough_matches: int = 60
+    #: Grid step of the window's rectification maps (exact on the grid, splines between).
     map_step_px: int = 16
+    #: ``coarse_min_zncc``, ``fine_range_px``: float, int. The coarse whole-box correlation must
+    #: reach this ZNCC; the fine search is then ±``fine_range_px`` around it (repetitive texture
+    #: stays unambiguous).
     coarse_min_zncc: float = 0.5
     equalise_blur: bool = True
     coarse_rows: int = 8
+    #: ``coarse_expand``, ``max_ambiguity``: The coarse box is the ROI expanded this much; a second
+    #: correlation peak (> 2 px away, a separate local maximum) above ``max_ambiguity`` × the first
+    #: makes the measurement fail as ambiguous.
     coarse_expand: float = 3.0
+    #: See ``coarse_expand`` above.
     max_ambiguity: float = 0.97
+    #: The first coarse peak must beat the second tile by tile: the paired t of the tiles' ZNCC
+    #: differences (:func:`~phonestereo.flows.coarse.peak_contrast`) must reach this, else the
+    #: measurement fails as ambiguous (a periodic texture's alias).
     min_peak_t: float = 2.0
+    #: When the W-T scale the coarse box's tiles show moves its edges by more than this against its
+    #: centre, the tele window is corrected for that scale before the coarse and fine steps (only
+    #: with the W-T scale fix on; :func:`~phonestereo.flows.coarse_gate.coarse_peak`).
     coarse_max_scale_drift_px: float = 4.0
+    #: The fine search is ±``fine_range_px`` around the coarse peak (repetitive texture stays
+    #: unambiguous; see ``coarse_min_zncc``).
     fine_range_px: int = 3
+    #: The surface's matches must form one band about the plane: when the fuller side beyond it (up
+    #: to 3 majority tolerances) holds this many times the band's matches, the measurement fails
+    #: (two disparities, no single one).
     max_band_split: float = 0.5
     # Wide and tele have different optics: a window never fits to the noise level (the
     # Middlebury-tuned residual-to-noise test would reject every match on a high-contrast

@@ -46,40 +46,29 @@ def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
 
 @dataclass(frozen=True)
 class RoiMeasurement:
-    """What the ROI blocks measured.
-
-    Attributes
-    ----------
-    ok : bool
-    reason : str
-        Why not ok (no texture, no surface, ...).
-    xy : (N, 2)
-        Kept matches, reference rectified wide pixels.
-    d, e, sigma_d : (N,)
-        Their disparity (W-T corrected when enabled), non-disparity error, 1σ, px.
-    in_roi : (N,) bool
-        Match inside the original ROI.
-    majority_px : float
-        The final majority disparity.
-    plane : PlaneFit or None
-    wt : WTScale or None
-    roi_grid : (M, 2)
-        The ROI's sample grid in the reference frame (where the depth is reported).
-    counts : dict
-        Matches after each block.
-    """
+    """What the ROI blocks measured."""
 
     ok: bool
+    #: Why not ok (no texture, no surface, ...).
     reason: str
+    #: (N, 2). Kept matches, reference rectified wide pixels.
     xy: F64
+    #: ``d``, ``e``, ``sigma_d``: (N,). Their disparity (W-T corrected when enabled), non-disparity
+    #: error, 1σ, px.
     d: F64
+    #: See ``d`` above.
     e: F64
+    #: See ``d`` above.
     sigma_d: F64
+    #: (N,) bool. Match inside the original ROI.
     in_roi: np.ndarray
+    #: The final majority disparity.
     majority_px: float
     plane: PlaneFit | None
     wt: WTScale | None
+    #: (M, 2). The ROI's sample grid in the reference frame (where the depth is reported).
     roi_grid: F64
+    #: dict. Matches after each block.
     counts: dict[str, int]
 
 

@@ -25,19 +25,6 @@ def _default_lens() -> LensModel:
 class Camera:
     """Intrinsics of one camera: image size, K (eq. 2) and a lens model.
 
-    Parameters
-    ----------
-    size : (int, int)
-        Image (width, height) in pixels.
-    fx, fy : float
-        Focal lengths in pixels (> 0).
-    cx, cy : float
-        Principal point in pixels.
-    lens : LensModel
-        Distortion model on normalised coordinates; pinhole ``opencv5`` zeros by default.
-    skew : float
-        K[0, 1]; zero for every phone camera (eq. 2), kept for OpenCV round trips.
-
     Examples
     --------
     >>> cam = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)
@@ -45,12 +32,19 @@ class Camera:
     [1074.5, 749.5]
     """
 
+    #: (int, int). Image (width, height) in pixels.
     size: tuple[int, int]
+    #: ``fx``, ``fy``: Focal lengths in pixels (> 0).
     fx: float
+    #: See ``fx`` above.
     fy: float
+    #: ``cx``, ``cy``: Principal point in pixels.
     cx: float
+    #: See ``cx`` above.
     cy: float
+    #: Distortion model on normalised coordinates; pinhole ``opencv5`` zeros by default.
     lens: LensModel = field(default_factory=_default_lens)
+    #: K[0, 1]; zero for every phone camera (eq. 2), kept for OpenCV round trips.
     skew: float = 0.0
 
     def __post_init__(self) -> None:

@@ -52,28 +52,21 @@ def epipolar_residual(F: Any, q_wide: Any, q_tele: Any) -> Array:
 
 @dataclass(frozen=True)
 class EssentialScales:
-    """Per-camera focal scales recovered from a reference and a current E (eq. 9).
+    """Per-camera focal scales recovered from a reference and a current E (eq. 9)."""
 
-    Attributes
-    ----------
-    s_wide, s_tele : float
-        Focal scales of the current state relative to the reference (K′ = K·D(s)).
-    A : float
-        The unknown overall factor of E′ (sign included).
-    condition : float
-        Condition number of the weighted log-domain system; ∞ when the entries used cannot
-        separate the three unknowns (e.g. E₃₃ and the 2×2 block both ≈ 0).
-    residual_rms : float
-        RMS log-domain residual of the fit (0 on exact data).
-    entries : tuple of (int, int)
-        The (row, col) entries of E used.
-    """
-
+    #: ``s_wide``, ``s_tele``: Focal scales of the current state relative to the reference (K′ =
+    #: K·D(s)).
     s_wide: float
+    #: See ``s_wide`` above.
     s_tele: float
+    #: The unknown overall factor of E′ (sign included).
     A: float
+    #: Condition number of the weighted log-domain system; ∞ when the entries used cannot separate
+    #: the three unknowns (e.g. E₃₃ and the 2×2 block both ≈ 0).
     condition: float
+    #: RMS log-domain residual of the fit (0 on exact data).
     residual_rms: float
+    #: tuple of (int, int). The (row, col) entries of E used.
     entries: tuple[tuple[int, int], ...]
 
     @property

@@ -42,14 +42,9 @@ VALID_RADIUS_MAX = 20.0  # normalised radius scanned for the valid field (87° o
 
 @dataclass(frozen=True)
 class LensModel(ABC):
-    """Base class: a distortion model with a flat coefficient vector in its documented order.
+    """Base class: a distortion model with a flat coefficient vector in its documented order."""
 
-    Parameters
-    ----------
-    coefficients : tuple of float
-        Model coefficients in the order of the model's docstring.
-    """
-
+    #: tuple of float. Model coefficients in the order of the model's docstring.
     coefficients: tuple[float, ...]
     name: ClassVar[str] = ""
 

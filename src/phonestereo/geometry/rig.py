@@ -20,13 +20,6 @@ MIN_BASELINE_M = 1e-5
 class Rig:
     """A wide + tele stereo pair.
 
-    Parameters
-    ----------
-    wide, tele : Camera
-        The two cameras.
-    T_tele_wide : Transform
-        Maps wide-frame points into the tele frame: p_tele = R·p_wide + t (metres).
-
     Examples
     --------
     >>> cam = Camera((2000, 1500), 1500.0, 1500.0, 999.5, 749.5)
@@ -35,8 +28,11 @@ class Rig:
     (0.012, 3.0)
     """
 
+    #: ``wide``, ``tele``: The two cameras.
     wide: Camera
+    #: See ``wide`` above.
     tele: Camera
+    #: Maps wide-frame points into the tele frame: p_tele = R·p_wide + t (metres).
     T_tele_wide: Transform
 
     def __post_init__(self) -> None:

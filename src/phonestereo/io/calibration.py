@@ -51,29 +51,20 @@ _TOP_KEYS = (
 
 @dataclass(frozen=True)
 class CalibrationConditions:
-    """The conditions a calibration was made under (thesis §3.1, §3.4, §3.5).
+    """The conditions a calibration was made under (thesis §3.1, §3.4, §3.5)."""
 
-    Attributes
-    ----------
-    focus_distance_m : float or None
-        Focus distance of both cameras in metres (> 0), e.g. 0.6 for the factory calibration.
-    temperature_c : float or None
-        Module temperature in °C, if known.
-    orientation : str or None
-        Orientation label, e.g. "landscape".
-    note : str
-        Free text.
-    wide_focal_length_mm : float or None
-        The wide lens's physical focal length in millimetres (0 < f < 100), as the phone
-        reports it (Camera2 ``LENS_INFO_AVAILABLE_FOCAL_LENGTHS``, EXIF ``FocalLength``). With
-        ``focus_distance_m`` it gives the wide's focus breathing between calibration and use
-        (:mod:`phonestereo.fixes.breathing`); None when unknown.
-    """
-
+    #: Focus distance of both cameras in metres (> 0), e.g. 0.6 for the factory calibration.
     focus_distance_m: float | None = None
+    #: Module temperature in °C, if known.
     temperature_c: float | None = None
+    #: Orientation label, e.g. "landscape".
     orientation: str | None = None
+    #: Free text.
     note: str = ""
+    #: The wide lens's physical focal length in millimetres (0 < f < 100), as the phone reports it
+    #: (Camera2 ``LENS_INFO_AVAILABLE_FOCAL_LENGTHS``, EXIF ``FocalLength``). With
+    #: ``focus_distance_m`` it gives the wide's focus breathing between calibration and use
+    #: (:mod:`phonestereo.fixes.breathing`); None when unknown.
     wide_focal_length_mm: float | None = None
 
     def __post_init__(self) -> None:
@@ -103,25 +94,17 @@ class CalibrationConditions:
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
-    """A stereo calibration: the rig, its conditions and optional uncertainty.
+    """A stereo calibration: the rig, its conditions and optional uncertainty."""
 
-    Attributes
-    ----------
-    rig : Rig
-        Wide and tele cameras and T_tele_wide (metres).
-    conditions : CalibrationConditions
-    covariance : ndarray, shape (P, P), or None
-        Parameter covariance over ``parameter_names`` (units of the named parameters).
-    parameter_names : tuple of str
-        The P parameter names, e.g. ``("wide.fx", "wide.cx", ...)``.
-    rms_px : float or None
-        RMS reprojection error in pixels.
-    """
-
+    #: Wide and tele cameras and T_tele_wide (metres).
     rig: Rig
     conditions: CalibrationConditions = field(default_factory=CalibrationConditions)
+    #: ndarray, shape (P, P), or None. Parameter covariance over ``parameter_names`` (units of the
+    #: named parameters).
     covariance: NDArray[np.float64] | None = None
+    #: tuple of str. The P parameter names, e.g. ``("wide.fx", "wide.cx", ...)``.
     parameter_names: tuple[str, ...] = ()
+    #: RMS reprojection error in pixels.
     rms_px: float | None = None
 
     def __post_init__(self) -> None:

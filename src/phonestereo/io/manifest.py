@@ -52,52 +52,39 @@ GRAVITY_TOL = 1e-3
 Vec3 = tuple[float, float, float]
 
 class CaptureEntry(pydantic.BaseModel):
-    """One wide + tele capture of a capture set (docs/capture-set.md).
-
-    Attributes
-    ----------
-    id : str
-        Unique, non-empty identifier within the set.
-    wide, tele : str
-        Image paths relative to the capture-set folder.
-    time_s : float or None
-        Seconds since the camera app started (≥ 0; heating, thesis §3.1). None (left out) when
-        unknown: the heating gate then falls back to the drift-rate check.
-    gravity : (float, float, float) or None
-        Device-frame unit gravity vector (|g| = 1 ± 1e-3).
-    orientation : str or None
-        Orientation bucket label, one of :data:`ORIENTATION_BUCKETS` ("landscape",
-        "landscape-flipped", "portrait", ...; case-normalised); gravity or orientation must be
-        given (thesis §3.4).
-    kind : {"face", "verification", "scene", "calibration"}
-    focus_group : str or None
-        Name of the refocus stack this capture belongs to (thesis §3.5.3).
-    focus_attempt : int or None
-        Index (≥ 0) of the attempt inside the stack.
-    focus_mode : {"manual", "auto", "unknown"}
-        "unknown" when left out: the fixed-focus gate then gates the capture, saying so.
-    focus_position : float or None
-        Lens position as reported by the module (may be unreliable).
-    temperature_c : float or None
-        Module temperature in °C, when reported.
-    roi : (int, int, int, int) or None
-        Region of interest [x, y, w, h] in wide pixels, w, h > 0.
-    """
+    """One wide + tele capture of a capture set (docs/capture-set.md)."""
 
     model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
+    #: Unique, non-empty identifier within the set.
     id: str
+    #: ``wide``, ``tele``: Image paths relative to the capture-set folder.
     wide: str
+    #: See ``wide`` above.
     tele: str
+    #: Seconds since the camera app started (≥ 0; heating, thesis §3.1). None (left out) when
+    #: unknown: the heating gate then falls back to the drift-rate check.
     time_s: float | None = Field(default=None, ge=0.0)
+    #: (float, float, float) or None. Device-frame unit gravity vector (|g| = 1 ± 1e-3).
     gravity: tuple[float, float, float] | None = None
+    #: Orientation bucket label, one of :data:`ORIENTATION_BUCKETS` ("landscape",
+    #: "landscape-flipped", "portrait", ...; case-normalised); gravity or orientation must be given
+    #: (thesis §3.4).
     orientation: str | None = None
+    #: {"face", "verification", "scene", "calibration"}.
     kind: Literal["face", "verification", "scene", "calibration"]
+    #: Name of the refocus stack this capture belongs to (thesis §3.5.3).
     focus_group: str | None = None
+    #: Index (≥ 0) of the attempt inside the stack.
     focus_attempt: int | None = Field(default=None, ge=0)
+    #: {"manual", "auto", "unknown"}. "unknown" when left out: the fixed-focus gate then gates the
+    #: capture, saying so.
     focus_mode: Literal["manual", "auto", "unknown"] = "unknown"
+    #: Lens position as reported by the module (may be unreliable).
     focus_position: float | None = None
+    #: Module temperature in °C, when reported.
     temperature_c: float | None = None
+    #: (int, int, int, int) or None. Region of interest [x, y, w, h] in wide pixels, w, h > 0.
     roi: tuple[int, int, int, int] | None = None
 
     @field_validator("id")
@@ -189,15 +176,9 @@ class Manifest(pydantic.BaseModel):
 
 @dataclass(frozen=True)
 class CaptureSet:
-    """A loaded, validated capture set.
+    """A loaded, validated capture set."""
 
-    Attributes
-    ----------
-    root : Path
-        The capture-set folder; every path of the manifest is relative to it.
-    manifest : Manifest
-    """
-
+    #: The capture-set folder; every path of the manifest is relative to it.
     root: Path
     manifest: Manifest
 

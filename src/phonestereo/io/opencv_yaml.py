@@ -211,17 +211,11 @@ def _size(reader: _Reader, cam: str, given: tuple[int, int] | None) -> tuple[int
 
 @dataclass(frozen=True)
 class YamlImport:
-    """An imported OpenCV calibration and what the import changed.
-
-    Attributes
-    ----------
-    calibration : Calibration
-    r_deviation : float
-        max |R·Rᵀ − I| of the file's R as printed (before it was snapped to the nearest
-        rotation; OpenCV prints 8 decimals, so ~1e-8 is normal).
-    """
+    """An imported OpenCV calibration and what the import changed."""
 
     calibration: Calibration
+    #: max |R·Rᵀ − I| of the file's R as printed (before it was snapped to the nearest rotation;
+    #: OpenCV prints 8 decimals, so ~1e-8 is normal).
     r_deviation: float
 
     @property

@@ -53,31 +53,22 @@ _MAD = 1.4826
 class LearnedExtent:
     """The disparity range and sensor positions a correction was learned on, and its
     systematic σ parts (module docstring).
-
-    Attributes
-    ----------
-    d_lo_px, d_hi_px : float
-        Learned (measured) disparities, 5th–95th percentile, px.
-    rho : float
-        Relative common-mode σ (capture spread ⊕ focal), dimensionless.
-    rho_captures : float
-        Its capture-spread part.
-    gain_sigma : float
-        σ of the correction's slope over disparity from the capture-level regression, px/px
-        (inf when the captures span too little disparity to tell).
-    capture_sigma_px : float
-        Capture-to-capture scatter of the per-capture mean offsets, px.
-    reach_px : float
-        Sensor distance from the nearest learned position that is still "learned", px.
-    n_captures : int
     """
 
+    #: ``d_lo_px``, ``d_hi_px``: Learned (measured) disparities, 5th–95th percentile, px.
     d_lo_px: float
+    #: See ``d_lo_px`` above.
     d_hi_px: float
+    #: Relative common-mode σ (capture spread ⊕ focal), dimensionless.
     rho: float
+    #: Its capture-spread part.
     rho_captures: float
+    #: σ of the correction's slope over disparity from the capture-level regression, px/px (inf when
+    #: the captures span too little disparity to tell).
     gain_sigma: float
+    #: Capture-to-capture scatter of the per-capture mean offsets, px.
     capture_sigma_px: float
+    #: Sensor distance from the nearest learned position that is still "learned", px.
     reach_px: float
     n_captures: int
     tree: Any

@@ -49,35 +49,23 @@ _MAD = 1.4826  # MAD → σ for a normal distribution
 
 @dataclass(frozen=True)
 class FieldConfig:
-    """How the smooth field is fitted.
+    """How the smooth field is fitted."""
 
-    Attributes
-    ----------
-    max_degree : int
-        Highest total degree tried for offset and gain (0..3).
-    folds : int
-        Cross-validation folds (≥ 2).
-    loss : str
-        Robust loss of ``least_squares`` ("soft_l1", "huber", "cauchy", "linear").
-    f_scale_px : float or None
-        Residual (px) where the loss turns robust; None = 1.5 × the robust residual scatter.
-    seed : int
-        Seed of the fold assignment.
-    min_degree_gain : int
-        Lowest gain degree the model choice may pick (-1: no gain term allowed; 0: always a
-        constant gain, the physics of a baseline or focal-length error, §3.6 — the learned
-        disparities rarely span enough for cross-validation to prove it, yet it decides the
-        extrapolation beyond them).
-    max_gain_degree : int
-        Highest gain degree tried (-1: offsets only, for disparities learned at one distance).
-    """
-
+    #: Highest total degree tried for offset and gain (0..3).
     max_degree: int = 3
+    #: Cross-validation folds (≥ 2).
     folds: int = 5
+    #: Robust loss of ``least_squares`` ("soft_l1", "huber", "cauchy", "linear").
     loss: str = "soft_l1"
+    #: Residual (px) where the loss turns robust; None = 1.5 × the robust residual scatter.
     f_scale_px: float | None = None
+    #: Seed of the fold assignment.
     seed: int = 0
+    #: Lowest gain degree the model choice may pick (-1: no gain term allowed; 0: always a constant
+    #: gain, the physics of a baseline or focal-length error, §3.6 — the learned disparities rarely
+    #: span enough for cross-validation to prove it, yet it decides the extrapolation beyond them).
     min_degree_gain: int = -1
+    #: Highest gain degree tried (-1: offsets only, for disparities learned at one distance).
     max_gain_degree: int = 3
 
     def __post_init__(self) -> None:
@@ -179,31 +167,23 @@ def _robust_fit(
 
 @dataclass(frozen=True)
 class SmoothField:
-    """A fitted correction field (see the module docstring for the model).
+    """A fitted correction field (see the module docstring for the model)."""
 
-    Attributes
-    ----------
-    degree_offset, degree_gain : int
-        Chosen polynomial degrees (gain −1 = no gain term).
-    coef : ndarray, shape (P,)
-        Coefficients (offset terms, then gain terms).
-    cov : ndarray, shape (P, P)
-        Their covariance, px².
-    scatter_px : float
-        Robust scatter of the residuals (1.4826 · MAD), px.
-    n_used, n_outliers : int
-        Observations fitted; those with |residual| > 3 scatter.
-    cv : tuple of CVScore
-        Every model tried, in order of complexity.
-    """
-
+    #: ``degree_offset``, ``degree_gain``: Chosen polynomial degrees (gain −1 = no gain term).
     degree_offset: int
+    #: See ``degree_offset`` above.
     degree_gain: int
+    #: ndarray, shape (P,). Coefficients (offset terms, then gain terms).
     coef: np.ndarray
+    #: ndarray, shape (P, P). Their covariance, px².
     cov: np.ndarray
+    #: Robust scatter of the residuals (1.4826 · MAD), px.
     scatter_px: float
+    #: ``n_used``, ``n_outliers``: Observations fitted; those with |residual| > 3 scatter.
     n_used: int
+    #: See ``n_used`` above.
     n_outliers: int
+    #: tuple of CVScore. Every model tried, in order of complexity.
     cv: tuple[CVScore, ...]
     frame: _Frame
 

@@ -69,42 +69,31 @@ SIGNIFICANCE = 2.0
 
 @dataclass(frozen=True)
 class HeatingTerm:
-    """A learned disparity offset per °C of module temperature (module docstring).
+    """A learned disparity offset per °C of module temperature (module docstring)."""
 
-    Attributes
-    ----------
-    ok : bool
-        False: no term (``reason`` says why); :meth:`offset_px` then gives 0 ± 0.
-    reason : str
-    slope_px_per_c, slope_sigma : float
-        k and its 1σ, px/°C (reference rectified pixels; px/s for a time-indexed term).
-    reference_c : float
-        T_ref, the median learned temperature, °C (t_ref, s, for a time-indexed term).
-    range_c : tuple[float, float]
-        Learned temperatures, min–max, °C (times, s, for a time-indexed term).
-    n_captures : int
-        Captures in the fit.
-    index : {"temperature_c", "time_s"}
-        What the term is indexed by. With ``"time_s"`` (the captures report no temperature)
-        the slope is px per second and the term is **not** a correction: the drift follows an
-        exponential of unknown τ that a line through the learning captures would overshoot,
-        so :meth:`offset_px` gives 0 and, when the slope is significant
-        (:data:`SIGNIFICANCE`), σ = |k|·τ·(1 − e^(−|t − t_ref|/τ)): the drift still to
-        come between t_ref and t on a warm-up curve of time constant τ (``tau_s``) that drifts
-        at k at t_ref.
-    tau_s : float
-        τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
-        ``FlowConfig.warmup_s`` / 2.6).
-    """
-
+    #: False: no term (``reason`` says why); :meth:`offset_px` then gives 0 ± 0.
     ok: bool
     reason: str
+    #: ``slope_px_per_c``, ``slope_sigma``: k and its 1σ, px/°C (reference rectified pixels; px/s
+    #: for a time-indexed term).
     slope_px_per_c: float = 0.0
+    #: See ``slope_px_per_c`` above.
     slope_sigma: float = 0.0
+    #: T_ref, the median learned temperature, °C (t_ref, s, for a time-indexed term).
     reference_c: float = float("nan")
+    #: Learned temperatures, min–max, °C (times, s, for a time-indexed term).
     range_c: tuple[float, float] = (float("nan"), float("nan"))
+    #: Captures in the fit.
     n_captures: int = 0
+    #: {"temperature_c", "time_s"}. What the term is indexed by. With ``"time_s"`` (the captures
+    #: report no temperature) the slope is px per second and the term is **not** a correction: the
+    #: drift follows an exponential of unknown τ that a line through the learning captures would
+    #: overshoot, so :meth:`offset_px` gives 0 and, when the slope is significant
+    #: (:data:`SIGNIFICANCE`), σ = |k|·τ·(1 − e^(−|t − t_ref|/τ)): the drift still to come between
+    #: t_ref and t on a warm-up curve of time constant τ (``tau_s``) that drifts at k at t_ref.
     index: str = "temperature_c"
+    #: τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
+    #: ``FlowConfig.warmup_s`` / 2.6).
     tau_s: float = 70.0
 
     @classmethod

@@ -57,43 +57,36 @@ __all__ = [
 
 @dataclass(frozen=True)
 class FaceDisparity:
-    """One wide face matched into the tele, its refined disparity and its IPD depth.
+    """One wide face matched into the tele, its refined disparity and its IPD depth."""
 
-    Attributes
-    ----------
-    wide_index, tele_index : int
-        Indices of the face in the wide and tele :class:`FaceResult` (tele −1: no tele
-        landmarks, the face was searched from its wide pupils).
-    x_px, y_px : float
-        Pupil midpoint in the rectified wide image, pixels.
-    d_px, sigma_d_px : float
-        Refined disparity at the pupil midpoint and its standard deviation, pixels.
-    e_px : float
-        Refined non-disparity error (median over windows), pixels.
-    d_landmark_px, e_landmark_px : float
-        The same from the pupil landmarks alone (the matching step), pixels.
-    depth_ipd_m : float
-        Z of the pupil midpoint from the IPD (eq. 11), along the rectified axis, metres.
-    d_expected_px : float
-        ``f·B / depth_ipd_m`` (eq. 4), pixels.
-    n_windows : int
-        Windows that converged and survived the outlier test.
-    zncc : float
-        Median ZNCC of those windows at the solution.
-    """
-
+    #: ``wide_index``, ``tele_index``: Indices of the face in the wide and tele :class:`FaceResult`
+    #: (tele −1: no tele landmarks, the face was searched from its wide pupils).
     wide_index: int
+    #: See ``wide_index`` above.
     tele_index: int
+    #: ``x_px``, ``y_px``: Pupil midpoint in the rectified wide image, pixels.
     x_px: float
+    #: See ``x_px`` above.
     y_px: float
+    #: ``d_px``, ``sigma_d_px``: Refined disparity at the pupil midpoint and its standard deviation,
+    #: pixels.
     d_px: float
+    #: See ``d_px`` above.
     sigma_d_px: float
+    #: Refined non-disparity error (median over windows), pixels.
     e_px: float
+    #: ``d_landmark_px``, ``e_landmark_px``: The same from the pupil landmarks alone (the matching
+    #: step), pixels.
     d_landmark_px: float
+    #: See ``d_landmark_px`` above.
     e_landmark_px: float
+    #: Z of the pupil midpoint from the IPD (eq. 11), along the rectified axis, metres.
     depth_ipd_m: float
+    #: ``f·B / depth_ipd_m`` (eq. 4), pixels.
     d_expected_px: float
+    #: Windows that converged and survived the outlier test.
     n_windows: int
+    #: Median ZNCC of those windows at the solution.
     zncc: float
 
     def to_dict(self) -> dict[str, Any]:

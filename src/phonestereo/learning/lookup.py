@@ -50,24 +50,16 @@ STRATEGIES = ("nearest", "mean", "max", "min", "centre")
 
 @dataclass(frozen=True)
 class LookupConfig:
-    """How the dictionary strategies look up.
+    """How the dictionary strategies look up."""
 
-    Attributes
-    ----------
-    k_nearest : int
-        Learned points averaged by ``nearest`` (1 = the thesis's closest landmark).
-    k_centre : int
-        Learned points nearest the principal point averaged by ``centre``.
-    xy_scale_px : float or None
-        Sensor distance that counts as one unit in the (x, y, d) metric; None = the larger
-        standard deviation of the learned x and y.
-    d_scale_px : float or None
-        Disparity difference that counts as one unit; None = the learned disparities' std.
-    """
-
+    #: Learned points averaged by ``nearest`` (1 = the thesis's closest landmark).
     k_nearest: int = 4
+    #: Learned points nearest the principal point averaged by ``centre``.
     k_centre: int = 4
+    #: Sensor distance that counts as one unit in the (x, y, d) metric; None = the larger standard
+    #: deviation of the learned x and y.
     xy_scale_px: float | None = None
+    #: Disparity difference that counts as one unit; None = the learned disparities' std.
     d_scale_px: float | None = None
 
     def __post_init__(self) -> None:

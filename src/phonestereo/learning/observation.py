@@ -76,45 +76,32 @@ def _finite(value: Any, name: str) -> float:
 
 @dataclass(frozen=True)
 class Observation:
-    """One learned disparity observation (thesis §3.6, Figure 3-30).
+    """One learned disparity observation (thesis §3.6, Figure 3-30)."""
 
-    Attributes
-    ----------
-    x_px, y_px : float
-        Sensor position in the rectified wide image, pixels ((0, 0) = centre of the top-left pixel).
-    d_measured_px : float
-        Disparity measured there after the earlier fixes, pixels.
-    d_expected_px : float
-        Disparity expected from the independent depth, f·B/Z (eq. 4), pixels.
-    depth_m : float
-        The independent depth Z (e.g. from the IPD, eq. 11), metres, > 0.
-    orientation : str
-        Orientation bucket label (§3.4); a fix is applied only within its bucket.
-    focus_group : str
-        Refocus stack the capture belongs to; ``""`` (or None) when none.
-    time_s : float
-        Seconds since the camera app started (heating, §3.1).
-    temperature_c : float or None
-        Module temperature in °C when the module reports it.
-    capture_id : str
-        The capture this observation was learned from (non-empty).
-    source : str
-        What gave the expected disparity: ``"face-chart"``, ``"population"``, ``"iris"``, ...
-    sigma_px : float
-        Standard deviation of the correction, pixels; NaN when unknown.
-    """
-
+    #: ``x_px``, ``y_px``: Sensor position in the rectified wide image, pixels ((0, 0) = centre of
+    #: the top-left pixel).
     x_px: float
+    #: See ``x_px`` above.
     y_px: float
+    #: Disparity measured there after the earlier fixes, pixels.
     d_measured_px: float
+    #: Disparity expected from the independent depth, f·B/Z (eq. 4), pixels.
     d_expected_px: float
+    #: The independent depth Z (e.g. from the IPD, eq. 11), metres, > 0.
     depth_m: float
+    #: Orientation bucket label (§3.4); a fix is applied only within its bucket.
     orientation: str
+    #: str. Refocus stack the capture belongs to; ``""`` (or None) when none.
     focus_group: str | None
+    #: Seconds since the camera app started (heating, §3.1).
     time_s: float
+    #: Module temperature in °C when the module reports it.
     temperature_c: float | None
+    #: The capture this observation was learned from (non-empty).
     capture_id: str
+    #: What gave the expected disparity: ``"face-chart"``, ``"population"``, ``"iris"``, ...
     source: str = "face-chart"
+    #: Standard deviation of the correction, pixels; NaN when unknown.
     sigma_px: float = field(default=math.nan)
 
     def __post_init__(self) -> None:
@@ -263,25 +250,17 @@ class Correction:
 
     Add ``value_px`` to the measured disparity. A query that cannot be served (no observations
     in its orientation bucket) has NaN value and sigma, ``n_used`` 0 and a ``reason``.
-
-    Attributes
-    ----------
-    value_px : ndarray, shape (N,)
-        Correction to add to the measured disparity, pixels.
-    sigma_px : ndarray, shape (N,)
-        Its standard deviation, pixels.
-    n_used : ndarray of int, shape (N,)
-        How many learned observations the value rests on.
-    strategy : str
-        The lookup strategy that produced it ("nearest", "mean", "max", "min", "centre", "field").
-    reason : str
-        Empty when served; otherwise why not.
     """
 
+    #: ndarray, shape (N,). Correction to add to the measured disparity, pixels.
     value_px: np.ndarray
+    #: ndarray, shape (N,). Its standard deviation, pixels.
     sigma_px: np.ndarray
+    #: ndarray of int, shape (N,). How many learned observations the value rests on.
     n_used: np.ndarray
+    #: The lookup strategy that produced it ("nearest", "mean", "max", "min", "centre", "field").
     strategy: str
+    #: Empty when served; otherwise why not.
     reason: str = ""
 
     def __post_init__(self) -> None:

@@ -25,17 +25,11 @@ from phonestereo.rectification import Rectification
 
 @dataclass(frozen=True)
 class WideToTeleGuide:
-    """A wide face → its raw-tele face box, through a rectification.
+    """A wide face → its raw-tele face box, through a rectification."""
 
-    Parameters
-    ----------
-    rect : Rectification
-        Of the calibration in use (any mode).
-    ipd_m : float
-        The IPD assumed for the depth of the face, metres.
-    """
-
+    #: Of the calibration in use (any mode).
     rect: Rectification
+    #: The IPD assumed for the depth of the face, metres.
     ipd_m: float = 0.063
     key: str = field(init=False, repr=False)
 

@@ -78,25 +78,17 @@ def json_differences(stored: str, given: str, limit: int = 3) -> list[str]:
 
 @dataclass(frozen=True)
 class StoreContext:
-    """The conditions observations are learned under (module docstring).
+    """The conditions observations are learned under (module docstring)."""
 
-    Attributes
-    ----------
-    calibration : str
-        Canonical JSON of the rig: ``{"wide", "tele", "T_tele_wide"}`` as
-        :meth:`~phonestereo.geometry.Rig.to_dict` writes them (metres, pixels). Conditions,
-        RMS and covariance are not part of it: they do not change what is measured.
-    lens_model : str
-        ``"<wide model>/<tele model>"``, e.g. ``"opencv5/opencv5"``.
-    rectification_mode : str
-        The reference rectification the observations' pixels live in.
-    flow_config : str
-        Canonical JSON of the learning-relevant flow configuration.
-    """
-
+    #: Canonical JSON of the rig: ``{"wide", "tele", "T_tele_wide"}`` as
+    #: :meth:`~phonestereo.geometry.Rig.to_dict` writes them (metres, pixels). Conditions, RMS and
+    #: covariance are not part of it: they do not change what is measured.
     calibration: str
+    #: ``"<wide model>/<tele model>"``, e.g. ``"opencv5/opencv5"``.
     lens_model: str
+    #: The reference rectification the observations' pixels live in.
     rectification_mode: str
+    #: Canonical JSON of the learning-relevant flow configuration.
     flow_config: str
 
     @classmethod

@@ -40,43 +40,33 @@ def check_mode(mode: str) -> Mode:
 
 @dataclass(frozen=True)
 class RectifyOptions:
-    """How large and how fine the rectified pair is.
+    """How large and how fine the rectified pair is."""
 
-    Attributes
-    ----------
-    resolution : {"wide", "tele"}
-        Rectified focal length: the wide's (default; the tele is downscaled by the zoom, the
-        thesis's choice, and in ``tele-to-wide`` the wide is not resampled at all) or the
-        tele's ("full resolution": no tele detail lost, the wide upsampled by the zoom).
-        Unlike OpenCV's stereoRectify, which gives both cameras the mean focal length (×1.5
-        downsampling of a ×3 tele *and* ×2 upsampling of the wide), one of the two images is
-        always kept at its native scale.
-    scale : float
-        Extra factor on that focal length (> 0), e.g. 0.5 for a half-size preview.
-    fov : {"shared", "wide"}
-        Rectified window: the tele's field of view (the only place with disparity; default)
-        or the wide's whole field of view.
-    roi : (x, y, w, h) or None
-        A window given in raw wide pixels instead (the manifest's ``roi``); overrides ``fov``.
-    margin_px : int
-        Rectified pixels added on every side of the window (≥ 0).
-    size : (w, h) or None
-        Force the rectified image size; the window is centred on the one ``fov``/``roi`` gives.
-    grid_step_px : int
-        Spacing of the coarse grid on which the remap maps are computed exactly before
-        bicubic-spline interpolation (≥ 1; 1 = exact at every pixel, slow).
-    antialias : bool
-        Gaussian pre-filter of an image that the rectification shrinks, σ = (s − 1)/2 raw
-        pixels for a shrink factor s (scikit-image's rule).
-    """
-
+    #: {"wide", "tele"}. Rectified focal length: the wide's (default; the tele is downscaled by the
+    #: zoom, the thesis's choice, and in ``tele-to-wide`` the wide is not resampled at all) or the
+    #: tele's ("full resolution": no tele detail lost, the wide upsampled by the zoom). Unlike
+    #: OpenCV's stereoRectify, which gives both cameras the mean focal length (×1.5 downsampling of
+    #: a ×3 tele *and* ×2 upsampling of the wide), one of the two images is always kept at its
+    #: native scale.
     resolution: Resolution = "wide"
+    #: Extra factor on that focal length (> 0), e.g. 0.5 for a half-size preview.
     scale: float = 1.0
+    #: {"shared", "wide"}. Rectified window: the tele's field of view (the only place with
+    #: disparity; default) or the wide's whole field of view.
     fov: FieldOfView = "shared"
+    #: (x, y, w, h) or None. A window given in raw wide pixels instead (the manifest's ``roi``);
+    #: overrides ``fov``.
     roi: tuple[int, int, int, int] | None = None
+    #: Rectified pixels added on every side of the window (≥ 0).
     margin_px: int = 0
+    #: (w, h) or None. Force the rectified image size; the window is centred on the one
+    #: ``fov``/``roi`` gives.
     size: tuple[int, int] | None = None
+    #: Spacing of the coarse grid on which the remap maps are computed exactly before bicubic-spline
+    #: interpolation (≥ 1; 1 = exact at every pixel, slow).
     grid_step_px: int = 8
+    #: Gaussian pre-filter of an image that the rectification shrinks, σ = (s − 1)/2 raw pixels for
+    #: a shrink factor s (scikit-image's rule).
     antialias: bool = True
 
     def __post_init__(self) -> None:

@@ -38,21 +38,6 @@ class Rectification:
 
     Build it with :meth:`from_rig`. Attributes are read-only.
 
-    Attributes
-    ----------
-    mode : {"tele-to-wide", "undistort-both", "canonical"}
-    rig : Rig
-        The calibration it was built from.
-    options : RectifyOptions
-    R_rect_wide, R_rect_tele : ndarray, shape (3, 3)
-        Wide / tele camera frame → rectified frame (directions).
-    wide_rect, tele_rect : Camera
-        The rectified cameras (same K and size; pinhole except in ``tele-to-wide``, where both
-        carry the wide's lens).
-    quarter_turns : int
-        k of the k·90° turn about the optical axis that puts the baseline nearest +x (for
-        ``canonical`` the nearest such turn, contained in R_rect_wide).
-
     Examples
     --------
     A folded ×3 module, tele 12 mm below the wide: a point 2 m in front of the wide gives
@@ -71,13 +56,23 @@ class Rectification:
     2.0
     """
 
+    #: {"tele-to-wide", "undistort-both", "canonical"}.
     mode: Mode
+    #: The calibration it was built from.
     rig: Rig
     options: RectifyOptions
+    #: ``R_rect_wide``, ``R_rect_tele``: ndarray, shape (3, 3). Wide / tele camera frame → rectified
+    #: frame (directions).
     R_rect_wide: Array
+    #: See ``R_rect_wide`` above.
     R_rect_tele: Array
+    #: ``wide_rect``, ``tele_rect``: The rectified cameras (same K and size; pinhole except in
+    #: ``tele-to-wide``, where both carry the wide's lens).
     wide_rect: Camera
+    #: See ``wide_rect`` above.
     tele_rect: Camera
+    #: k of the k·90° turn about the optical axis that puts the baseline nearest +x (for
+    #: ``canonical`` the nearest such turn, contained in R_rect_wide).
     quarter_turns: int
     _cache: dict[tuple[str, int], tuple[NDArray[np.float32], NDArray[np.float32]]] = field(
         default_factory=dict, repr=False

@@ -42,41 +42,32 @@ _WIDE_TARGETS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (
 
 @dataclass(frozen=True)
 class CalibrationConfig:
-    """Calibration captures: a chessboard in many poses, or one shot of the three-plane chart.
+    """Calibration captures: a chessboard in many poses, or one shot of the three-plane chart."""
 
-    Attributes
-    ----------
-    chart : {"chessboard", "three-plane"}
-        The variant.
-    wide_poses, tele_poses : int
-        Board poses spread over the wide image, and poses filling the tele.
-    pattern : (int, int)
-        Inner corners (cols, rows) of the chessboard; cols + rows odd so that its 180° turn
-        is visible (the first square is black).
-    square_m : float
-        Chessboard square, metres (one-square white margin).
-    wide_distance_m : (float, float)
-        Range of board distances of the wide poses, metres.
-    tele_distance_m : float
-        Board distance of the tele poses (and of the three-plane chart), metres.
-    max_tilt_deg : float
-        Largest board tilt (wide poses; the tele poses halve it so the board stays whole).
-    focus_m : float or None
-        Manual focus distance; None = the module's calibration focus distance.
-    start_s, interval_s : float
-        Time of the first capture (heated by then) and the spacing, seconds.
-    """
-
+    #: {"chessboard", "three-plane"}. The variant.
     chart: Literal["chessboard", "three-plane"] = "chessboard"
+    #: ``wide_poses``, ``tele_poses``: Board poses spread over the wide image, and poses filling the
+    #: tele.
     wide_poses: int = 12
+    #: See ``wide_poses`` above.
     tele_poses: int = 6
+    #: (int, int). Inner corners (cols, rows) of the chessboard; cols + rows odd so that its 180°
+    #: turn is visible (the first square is black).
     pattern: tuple[int, int] = (9, 6)
+    #: Chessboard square, metres (one-square white margin).
     square_m: float = 0.02
+    #: (float, float). Range of board distances of the wide poses, metres.
     wide_distance_m: tuple[float, float] = (0.3, 0.45)
+    #: Board distance of the tele poses (and of the three-plane chart), metres.
     tele_distance_m: float = 0.65
+    #: Largest board tilt (wide poses; the tele poses halve it so the board stays whole).
     max_tilt_deg: float = 45.0
+    #: Manual focus distance; None = the module's calibration focus distance.
     focus_m: float | None = None
+    #: ``start_s``, ``interval_s``: Time of the first capture (heated by then) and the spacing,
+    #: seconds.
     start_s: float = 600.0
+    #: See ``start_s`` above.
     interval_s: float = 2.0
 
     def __post_init__(self) -> None:

@@ -32,40 +32,29 @@ ROLES: tuple[Role, Role] = ("wide", "tele")
 
 @dataclass(frozen=True)
 class CaptureConditions:
-    """What the scenario asks for at one capture (the simulator adds the randomness).
+    """What the scenario asks for at one capture (the simulator adds the randomness)."""
 
-    Attributes
-    ----------
-    id : str
-        Capture id (unique in the set).
-    kind : {"verification", "face", "scene"}
-        Manifest kind.
-    time_s : float
-        Seconds since the camera app started (drives heating).
-    T_world_device : Transform
-        Nominal device pose in the world (before hand shake).
-    handheld : bool
-        Hand shake on this capture (False: tripod).
-    focus_mode : {"manual", "auto"}
-        Manual focus at ``focus_m`` or autofocus on a subject at ``focus_m``.
-    focus_m : float
-        Manual focus distance or autofocus subject distance, metres.
-    focus_group, focus_attempt : str or None, int or None
-        Refocus stack name and index.
-    lens_noise : (float, float) or None
-        Standard-normal draws of the (wide, tele) lens-position noise to use instead of fresh
-        ones: captures that share them have the focus locked (thesis §3.1 heating runs).
-    """
-
+    #: Capture id (unique in the set).
     id: str
+    #: {"verification", "face", "scene"}. Manifest kind.
     kind: Literal["verification", "face", "scene"]
+    #: Seconds since the camera app started (drives heating).
     time_s: float
+    #: Nominal device pose in the world (before hand shake).
     T_world_device: Transform
+    #: Hand shake on this capture (False: tripod).
     handheld: bool
+    #: {"manual", "auto"}. Manual focus at ``focus_m`` or autofocus on a subject at ``focus_m``.
     focus_mode: Literal["manual", "auto"]
+    #: Manual focus distance or autofocus subject distance, metres.
     focus_m: float
+    #: ``focus_group``, ``focus_attempt``: str or None, int or None. Refocus stack name and index.
     focus_group: str | None = None
+    #: See ``focus_group`` above.
     focus_attempt: int | None = None
+    #: (float, float) or None. Standard-normal draws of the (wide, tele) lens-position noise to use
+    #: instead of fresh ones: captures that share them have the focus locked (thesis §3.1 heating
+    #: runs).
     lens_noise: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
@@ -77,32 +66,21 @@ class CaptureConditions:
 
 @dataclass(frozen=True)
 class CameraState:
-    """One camera's true state at a capture.
+    """One camera's true state at a capture."""
 
-    Attributes
-    ----------
-    camera : Camera
-        The true camera (K, lens) at this capture.
-    focus_distance_m : float
-        Distance the lens is focused at (after autofocus error / failure).
-    image_distance_m : float
-        Lens-to-sensor distance v, metres.
-    focal_scale : float
-        fx / fx of the calibration-condition true camera (focus breathing, eq. 8's s).
-    principal_point_shift_px : (float, float)
-        (cx, cy) minus the calibration-condition true camera's, pixels.
-    af_failed : bool
-        Autofocus missed the subject.
-    reported_focus_position : float or None
-        What the module reports (lens travel in µm plus noise), if it reports it.
-    """
-
+    #: The true camera (K, lens) at this capture.
     camera: Camera
+    #: Distance the lens is focused at (after autofocus error / failure).
     focus_distance_m: float
+    #: Lens-to-sensor distance v, metres.
     image_distance_m: float
+    #: fx / fx of the calibration-condition true camera (focus breathing, eq. 8's s).
     focal_scale: float
+    #: (float, float). (cx, cy) minus the calibration-condition true camera's, pixels.
     principal_point_shift_px: tuple[float, float]
+    #: Autofocus missed the subject.
     af_failed: bool
+    #: What the module reports (lens travel in µm plus noise), if it reports it.
     reported_focus_position: float | None
 
 
@@ -231,21 +209,15 @@ def true_state(
 
 @dataclass(frozen=True)
 class CapturedImage:
-    """One camera's output at a capture.
+    """One camera's output at a capture."""
 
-    Attributes
-    ----------
-    gray : ndarray, shape (H, W), uint8
-        The grey image the pipeline reads (``io.read_gray`` of the stored file).
-    data : bytes or None
-        The file a phone stores (JPEG or PNG bytes from the ISP); None on the linear path,
-        where ``gray`` is written as a PNG.
-    suffix : str
-        ``.jpg`` or ``.png``.
-    """
-
+    #: ndarray, shape (H, W), uint8. The grey image the pipeline reads (``io.read_gray`` of the
+    #: stored file).
     gray: NDArray[np.uint8]
+    #: The file a phone stores (JPEG or PNG bytes from the ISP); None on the linear path, where
+    #: ``gray`` is written as a PNG.
     data: bytes | None
+    #: ``.jpg`` or ``.png``.
     suffix: str
 
 

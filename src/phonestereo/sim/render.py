@@ -65,19 +65,15 @@ _RIM = (_CORNERS[:, None] + np.array([0.25, 0.5, 0.75])[:, None] * _SIDES[:, Non
 @dataclass(frozen=True)
 class RenderedView:
     """One rendered camera view (noise-free; :func:`phonestereo.sim.sensor.capture` digitises it).
-
-    Attributes
-    ----------
-    radiance : ndarray, shape (H, W), float32
-        Pixel-area mean radiance in [0, 1].
-    object_index : ndarray, shape (H, W), int16
-        Index into ``scene.objects`` of the object seen at each pixel centre; −1 = background.
-    depth_m : ndarray, shape (H, W), float32
-        Camera-frame Z of the surface at each pixel centre, metres; NaN on the background.
     """
 
+    #: ndarray, shape (H, W), float32. Pixel-area mean radiance in [0, 1].
     radiance: NDArray[np.float32]
+    #: ndarray, shape (H, W), int16. Index into ``scene.objects`` of the object seen at each pixel
+    #: centre; −1 = background.
     object_index: I16
+    #: ndarray, shape (H, W), float32. Camera-frame Z of the surface at each pixel centre, metres;
+    #: NaN on the background.
     depth_m: NDArray[np.float32]
 
 

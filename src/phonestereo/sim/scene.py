@@ -60,20 +60,13 @@ class SceneChart(Protocol):
 
 @dataclass(frozen=True)
 class PlanarObject:
-    """A chart posed in the world.
+    """A chart posed in the world."""
 
-    Parameters
-    ----------
-    chart : SceneChart
-        The chart (verification chart, face chart, textured plane, ...).
-    T_world_chart : Transform
-        Pose of the chart frame in the world frame (maps chart points into the world).
-    name : str
-        Label of the object (used in ground truth and ``object_index`` bookkeeping).
-    """
-
+    #: The chart (verification chart, face chart, textured plane, ...).
     chart: SceneChart
+    #: Pose of the chart frame in the world frame (maps chart points into the world).
     T_world_chart: Transform
+    #: Label of the object (used in ground truth and ``object_index`` bookkeeping).
     name: str = "object"
 
     def __post_init__(self) -> None:
@@ -107,24 +100,18 @@ class Lighting:
 
         gain · (1 + gradient_x·x̂ + gradient_y·ŷ) · (1 − vignetting·r²)
 
-    Parameters
-    ----------
-    gain : float
-        Overall illumination factor (> 0; values above 1 can saturate the sensor).
-    gradient : (float, float)
-        Relative illumination change from the centre to the right and bottom edges;
-        ``|gx| + |gy| < 1`` keeps the light positive.
-    vignetting : float
-        Relative fall-off at the image corners, 0 ≤ v < 1.
-
     Examples
     --------
     >>> Lighting(vignetting=0.3).field((3, 3)).astype(float).round(3).tolist()[0]   # top row
     [0.7, 0.85, 0.7]
     """
 
+    #: Overall illumination factor (> 0; values above 1 can saturate the sensor).
     gain: float = 1.0
+    #: (float, float). Relative illumination change from the centre to the right and bottom edges;
+    #: ``|gx| + |gy| < 1`` keeps the light positive.
     gradient: tuple[float, float] = (0.0, 0.0)
+    #: Relative fall-off at the image corners, 0 ≤ v < 1.
     vignetting: float = 0.0
 
     def __post_init__(self) -> None:
@@ -155,20 +142,13 @@ class Lighting:
 
 @dataclass(frozen=True)
 class Scene:
-    """Planar objects in front of a uniform background, with optional lighting.
+    """Planar objects in front of a uniform background, with optional lighting."""
 
-    Parameters
-    ----------
-    objects : tuple of PlanarObject
-        The objects; the nearest one wins per image sample (occlusion).
-    background : float
-        Radiance of everything that is not an object, in [0, 1].
-    lighting : Lighting or None
-        Multiplicative illumination over the image; None = uniform.
-    """
-
+    #: tuple of PlanarObject. The objects; the nearest one wins per image sample (occlusion).
     objects: tuple[PlanarObject, ...]
+    #: Radiance of everything that is not an object, in [0, 1].
     background: float = 0.5
+    #: Multiplicative illumination over the image; None = uniform.
     lighting: Lighting | None = None
 
     def __post_init__(self) -> None:
@@ -216,23 +196,17 @@ def facing_pose(
 
 @dataclass(frozen=True, eq=False)
 class ViewPlane:
-    """One object of a scene as seen by one camera.
+    """One object of a scene as seen by one camera."""
 
-    Attributes
-    ----------
-    index : int
-        Index of the object in ``scene.objects``.
-    chart : SceneChart
-        Its chart.
-    Minv : ndarray, shape (3, 3)
-        Maps a normalised ray (x, y, 1) to (u, v, 1) / Z: chart uv (metres) and camera depth Z.
-    box : (int, int, int, int)
-        Pixel box (x0, y0, x1, y1), ends exclusive, outside which the object is not seen.
-    """
-
+    #: Index of the object in ``scene.objects``.
     index: int
+    #: Its chart.
     chart: SceneChart
+    #: ndarray, shape (3, 3). Maps a normalised ray (x, y, 1) to (u, v, 1) / Z: chart uv (metres)
+    #: and camera depth Z.
     Minv: F64
+    #: (int, int, int, int). Pixel box (x0, y0, x1, y1), ends exclusive, outside which the object is
+    #: not seen.
     box: tuple[int, int, int, int]
 
 

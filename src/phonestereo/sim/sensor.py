@@ -34,22 +34,6 @@ __all__ = ["SensorModel", "capture"]
 class SensorModel:
     """Noise and quantisation parameters of one camera's sensor.
 
-    Parameters
-    ----------
-    full_well_e : float
-        Full-well capacity, electrons (> 0).
-    read_noise_e : float
-        Read noise standard deviation, electrons (≥ 0).
-    black_level_dn : float
-        Black level, DN (≥ 0, below the white level).
-    exposure : float
-        Fraction of the full well reached by reflectance 1 (0 < exposure ≤ 1 keeps white below
-        saturation; larger values clip highlights).
-    bit_depth : int
-        Bits per pixel of the quantised output, 1–16 (uint8 up to 8 bits, else uint16).
-    jpeg_quality : int or None
-        OpenCV JPEG quality 1–100 for a compression round trip (8-bit only); None = none.
-
     Examples
     --------
     >>> s = SensorModel()
@@ -59,11 +43,18 @@ class SensorModel:
     2.085
     """
 
+    #: Full-well capacity, electrons (> 0).
     full_well_e: float = 6000.0
+    #: Read noise standard deviation, electrons (≥ 0).
     read_noise_e: float = 2.5
+    #: Black level, DN (≥ 0, below the white level).
     black_level_dn: float = 0.0
+    #: Fraction of the full well reached by reflectance 1 (0 < exposure ≤ 1 keeps white below
+    #: saturation; larger values clip highlights).
     exposure: float = 0.8
+    #: Bits per pixel of the quantised output, 1–16 (uint8 up to 8 bits, else uint16).
     bit_depth: int = 8
+    #: OpenCV JPEG quality 1–100 for a compression round trip (8-bit only); None = none.
     jpeg_quality: int | None = None
 
     def __post_init__(self) -> None:

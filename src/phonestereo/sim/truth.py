@@ -25,20 +25,15 @@ FOLD_TOL_NORMALISED = 1e-7
 
 @dataclass(frozen=True, eq=False)
 class KeypointTruth:
-    """One keypoint set of one object at one capture.
+    """One keypoint set of one object at one capture."""
 
-    Attributes
-    ----------
-    ids : ndarray (N, k) int
-    wide_px, tele_px : ndarray (N, 2)
-        True pixels, NaN where not visible.
-    depth_m : ndarray (N,)
-        True depth Z in the wide frame, metres.
-    """
-
+    #: ndarray (N, k) int.
     ids: NDArray[np.int64]
+    #: ``wide_px``, ``tele_px``: ndarray (N, 2). True pixels, NaN where not visible.
     wide_px: Array
+    #: See ``wide_px`` above.
     tele_px: Array
+    #: ndarray (N,). True depth Z in the wide frame, metres.
     depth_m: Array
 
 

@@ -30,29 +30,19 @@ Progress = Callable[[int, int, str], None]
 
 @dataclass(frozen=True)
 class AnalysisOutput:
-    """What an analysis produced.
+    """What an analysis produced."""
 
-    Attributes
-    ----------
-    name : str
-        The analysis name.
-    ok : bool
-        False when the data could not give the result (the reason says why).
-    reason : str
-        Why not ok, or notes.
-    summary : tuple of str
-        Human-readable lines (the CLI prints them).
-    table : dict
-        The JSON table written next to the figures (``<name>.json``).
-    files : tuple of Path
-        Every file written (figures and the table).
-    """
-
+    #: The analysis name.
     name: str
+    #: False when the data could not give the result (the reason says why).
     ok: bool
+    #: Why not ok, or notes.
     reason: str
+    #: tuple of str. Human-readable lines (the CLI prints them).
     summary: tuple[str, ...]
+    #: dict. The JSON table written next to the figures (``<name>.json``).
     table: dict[str, Any]
+    #: tuple of Path. Every file written (figures and the table).
     files: tuple[Path, ...] = field(default_factory=tuple)
 
 

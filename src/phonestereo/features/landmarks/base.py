@@ -43,40 +43,29 @@ def _frozen(a: Any, shape: tuple[int | None, ...], name: str) -> F64:
 
 @dataclass(frozen=True, eq=False)
 class Face:
-    """One face measured in one image.
+    """One face measured in one image."""
 
-    Attributes
-    ----------
-    pupils_px : ndarray, shape (2, 2)
-        Pupil centres (x, y), pixels; row 0 is the eye on the image left.
-    eye_centres_px : ndarray, shape (2, 2)
-        The thesis's eye centres: centroid of each eye's contour landmarks, same order.
-    landmarks_px : ndarray, shape (K, 2)
-        All landmarks of the backend (MediaPipe: K = 478, OpenFace: K = 68), pixels.
-    yaw_rad : float
-        Head yaw: the eye axis's angle out of the frontal plane, positive when eye 1 (image
-        right) is farther from the camera than eye 0. NaN when unknown.
-    score : float
-        Detection confidence in [0, 1].
-    box_px : ndarray, shape (4,)
-        Landmark bounding box (x0, y0, x1, y1), pixels.
-    pupil_source : str
-        ``"iris"`` (iris landmarks) or ``"eye-contour"`` (no iris landmarks: pupils are the
-        eye centres).
-    yaw_reference : str
-        What the yaw is measured from: ``"sight"`` (the plane perpendicular to the line of
-        sight; appearance-based landmarks such as MediaPipe's) or ``"image"`` (the image
-        plane; OpenFace's head pose in camera coordinates). See
-        :func:`phonestereo.learning.ipd.face_depth`.
-    """
-
+    #: ndarray, shape (2, 2). Pupil centres (x, y), pixels; row 0 is the eye on the image left.
     pupils_px: F64
+    #: ndarray, shape (2, 2). The thesis's eye centres: centroid of each eye's contour landmarks,
+    #: same order.
     eye_centres_px: F64
+    #: ndarray, shape (K, 2). All landmarks of the backend (MediaPipe: K = 478, OpenFace: K = 68),
+    #: pixels.
     landmarks_px: F64
+    #: Head yaw: the eye axis's angle out of the frontal plane, positive when eye 1 (image right) is
+    #: farther from the camera than eye 0. NaN when unknown.
     yaw_rad: float
+    #: Detection confidence in [0, 1].
     score: float
+    #: ndarray, shape (4,). Landmark bounding box (x0, y0, x1, y1), pixels.
     box_px: F64
+    #: ``"iris"`` (iris landmarks) or ``"eye-contour"`` (no iris landmarks: pupils are the eye
+    #: centres).
     pupil_source: str = "iris"
+    #: What the yaw is measured from: ``"sight"`` (the plane perpendicular to the line of sight;
+    #: appearance-based landmarks such as MediaPipe's) or ``"image"`` (the image plane; OpenFace's
+    #: head pose in camera coordinates). See :func:`phonestereo.learning.ipd.face_depth`.
     yaw_reference: str = "sight"
 
     def __post_init__(self) -> None:

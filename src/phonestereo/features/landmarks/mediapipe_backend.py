@@ -67,40 +67,6 @@ def _solutions() -> Any:
 class MediaPipeBackend(LandmarkBackend):
     """Faces, pupils and yaw with MediaPipe Face Mesh (iris landmarks), any face size.
 
-    Parameters
-    ----------
-    min_detection_confidence : float
-        Face-detector score threshold in (0, 1).
-    min_tile_px : int
-        Smallest search tile side, pixels. The full-range detector finds faces down to about
-        6 % of a tile; the smallest tile side is the first of max(W, H) / 2^k at or above
-        ``min_tile_px`` (500 px for a 2000-px image: faces from ~30 px wide, IPD ~13 px).
-    crop_scale : float
-        Side of the landmark crop relative to the detected face box.
-    crop_px : (int, int)
-        Range of the crop side after resampling, pixels (small faces are upsampled).
-    max_faces : int
-        At most this many candidates get landmarks (highest detector score first).
-    max_yaw_rad : float
-        Faces turned further are rejected as profiles.
-    min_ipd_px : float
-        Faces with a smaller pixel IPD are rejected as too small to measure.
-    mirror_average : bool
-        Also run Face Mesh on the mirrored crop and average pupils, eye centres and yaw
-        (halves the network's left/right bias: mirrored images give the same IPD).
-    two_level_tiles : (float, float) or None
-        Search the whole image and one level of tiles (:func:`tile_grid`'s ``two_level``)
-        instead of the pyramid down to ``min_tile_px``: ~3× fewer detector runs.
-    quarter_turns : tuple of int
-        Also search the image turned by these many quarter turns counter-clockwise (MediaPipe
-        misses faces rolled by more than ~45°); ``(0, 1, 2, 3)`` for any orientation, at 4×
-        the time. Results are in the original image's pixels.
-    detector_max_px : int or None
-        Tiles larger than this are shrunk by a whole factor (area average, to at most this
-        side) before the face detector, which sees them at 192 px anyway; the landmarks are
-        still measured on full-resolution crops. None: the tiles as they are (a 12 MP image's
-        whole-image tile costs MediaPipe ~30 ms to take in and resize).
-
     Examples
     --------
     >>> res = MediaPipeBackend().detect(np.full((240, 320), 128, np.uint8))   # blank image
@@ -108,16 +74,36 @@ class MediaPipeBackend(LandmarkBackend):
     (False, 'no face found (1 tile(s) of 320 px searched)')
     """
 
+    #: Face-detector score threshold in (0, 1).
     min_detection_confidence: float = 0.5
+    #: Smallest search tile side, pixels. The full-range detector finds faces down to about 6 % of a
+    #: tile; the smallest tile side is the first of max(W, H) / 2^k at or above ``min_tile_px`` (500
+    #: px for a 2000-px image: faces from ~30 px wide, IPD ~13 px).
     min_tile_px: int = 256
+    #: Side of the landmark crop relative to the detected face box.
     crop_scale: float = 2.2
+    #: (int, int). Range of the crop side after resampling, pixels (small faces are upsampled).
     crop_px: tuple[int, int] = (256, 768)
+    #: At most this many candidates get landmarks (highest detector score first).
     max_faces: int = 64
+    #: Faces turned further are rejected as profiles.
     max_yaw_rad: float = MAX_YAW_RAD
+    #: Faces with a smaller pixel IPD are rejected as too small to measure.
     min_ipd_px: float = 8.0
+    #: Also run Face Mesh on the mirrored crop and average pupils, eye centres and yaw (halves the
+    #: network's left/right bias: mirrored images give the same IPD).
     mirror_average: bool = True
+    #: tuple of int. Also search the image turned by these many quarter turns counter-clockwise
+    #: (MediaPipe misses faces rolled by more than ~45°); ``(0, 1, 2, 3)`` for any orientation, at
+    #: 4× the time. Results are in the original image's pixels.
     quarter_turns: tuple[int, ...] = (0,)
+    #: (float, float) or None. Search the whole image and one level of tiles (:func:`tile_grid`'s
+    #: ``two_level``) instead of the pyramid down to ``min_tile_px``: ~3× fewer detector runs.
     two_level_tiles: tuple[float, float] | None = None
+    #: Tiles larger than this are shrunk by a whole factor (area average, to at most this side)
+    #: before the face detector, which sees them at 192 px anyway; the landmarks are still measured
+    #: on full-resolution crops. None: the tiles as they are (a 12 MP image's whole-image tile costs
+    #: MediaPipe ~30 ms to take in and resize).
     detector_max_px: int | None = None
     name: str = "mediapipe"
 

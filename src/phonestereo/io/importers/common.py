@@ -48,27 +48,19 @@ STANDARD_GRAVITY = 9.80665  # m/s², the accelerometer's 1 g
 
 @dataclass(frozen=True)
 class ImportResult:
-    """What an importer wrote and how it converted.
+    """What an importer wrote and how it converted."""
 
-    Attributes
-    ----------
-    out : Path
-        The capture-set folder.
-    captures : int
-        Number of captures written.
-    tele_role : dict
-        Which platform camera became ``wide`` and which ``tele`` (decided by focal length).
-    lens_fit_px : dict
-        Per camera, the max residual in pixels of a lens-model fit (Apple lookup tables);
-        empty when the platform's model is ours exactly (Android).
-    notes : tuple of str
-        Every conversion decision worth telling the user (re-orthonormalised rotations, ...).
-    """
-
+    #: The capture-set folder.
     out: Path
+    #: Number of captures written.
     captures: int
+    #: dict. Which platform camera became ``wide`` and which ``tele`` (decided by focal length).
     tele_role: dict[str, str]
+    #: dict. Per camera, the max residual in pixels of a lens-model fit (Apple lookup tables); empty
+    #: when the platform's model is ours exactly (Android).
     lens_fit_px: dict[str, float] = field(default_factory=dict)
+    #: tuple of str. Every conversion decision worth telling the user (re-orthonormalised rotations,
+    #: ...).
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
