@@ -47,6 +47,10 @@ class LensModel(ABC):
     #: tuple of float. Model coefficients in the order of the model's docstring.
     coefficients: tuple[float, ...]
     name: ClassVar[str] = ""
+    #: Fewest and most coefficients the model takes.
+    n_range: ClassVar[tuple[int, int]] = (0, 0)
+    #: The coefficients the model takes, as its count error names them.
+    layout: ClassVar[str] = ""
 
     def __post_init__(self) -> None:
         coeffs = tuple(float(c) for c in self.coefficients)
@@ -55,10 +59,12 @@ class LensModel(ABC):
         self._check_count(len(coeffs))
         object.__setattr__(self, "coefficients", coeffs)
 
-    # --- model-specific parts -------------------------------------------------------------
-    @abstractmethod
-    def _check_count(self, n: int) -> None: ...
+    def _check_count(self, n: int) -> None:
+        lo, hi = self.n_range
+        if not lo <= n <= hi:
+            raise InputError(f"lens '{self.name}' takes {self.layout}, got {n} coefficients")
 
+    # --- model-specific parts -------------------------------------------------------------
     @abstractmethod
     def _tangential(self) -> tuple[float, float]: ...
 

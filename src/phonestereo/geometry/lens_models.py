@@ -23,10 +23,8 @@ class OpenCV5(LensModel):
     """OpenCV's 5-coefficient Brown–Conrady model (k1, k2, p1, p2, k3)."""
 
     name: ClassVar[str] = "opencv5"
-
-    def _check_count(self, n: int) -> None:
-        if n != 5:
-            raise InputError(f"lens 'opencv5' takes 5 coefficients (k1, k2, p1, p2, k3), got {n}")
+    n_range: ClassVar[tuple[int, int]] = (5, 5)
+    layout: ClassVar[str] = "5 coefficients (k1, k2, p1, p2, k3)"
 
     def _tangential(self) -> tuple[float, float]:
         return self.coefficients[2], self.coefficients[3]
@@ -49,12 +47,8 @@ class OpenCV8(LensModel):
     """OpenCV's 8-coefficient rational model (k1, k2, p1, p2, k3, k4, k5, k6)."""
 
     name: ClassVar[str] = "opencv8"
-
-    def _check_count(self, n: int) -> None:
-        if n != 8:
-            raise InputError(
-                f"lens 'opencv8' takes 8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6), got {n}"
-            )
+    n_range: ClassVar[tuple[int, int]] = (8, 8)
+    layout: ClassVar[str] = "8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6)"
 
     def _tangential(self) -> tuple[float, float]:
         return self.coefficients[2], self.coefficients[3]
@@ -88,13 +82,8 @@ class RadialOdd(LensModel):
     """
 
     name: ClassVar[str] = "radial-odd"
-
-    def _check_count(self, n: int) -> None:
-        if not 3 <= n <= 12:
-            raise InputError(
-                "lens 'radial-odd' takes (k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms, "
-                f"got {n} coefficients"
-            )
+    n_range: ClassVar[tuple[int, int]] = (3, 12)
+    layout: ClassVar[str] = "(k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms"
 
     @property
     def n_radial(self) -> int:
@@ -152,13 +141,8 @@ class RadialOddCentred(LensModel):
     """
 
     name: ClassVar[str] = "radial-odd-centred"
-
-    def _check_count(self, n: int) -> None:
-        if not 5 <= n <= 14:
-            raise InputError(
-                "lens 'radial-odd-centred' takes (k1, …, kn, p1, p2, c_x, c_y) with "
-                f"1 <= n <= 10 radial terms, got {n} coefficients"
-            )
+    n_range: ClassVar[tuple[int, int]] = (5, 14)
+    layout: ClassVar[str] = "(k1, …, kn, p1, p2, c_x, c_y) with 1 <= n <= 10 radial terms"
 
     @cached_property
     def inner(self) -> RadialOdd:
