@@ -21,7 +21,7 @@ translation is off; :func:`depth_agreement` is the acceptance measure (mean e pe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -79,12 +79,7 @@ class TranslationComponents:
 
     def to_dict(self) -> dict[str, float]:
         """JSON-ready dict (metres, degrees)."""
-        return {
-            "baseline_m": self.baseline_m,
-            "non_baseline_m": self.non_baseline_m,
-            "z_m": self.z_m,
-            "tilt_deg": self.tilt_deg,
-        }
+        return asdict(self)
 
 
 def predicted_nondisparity_px(
