@@ -51,6 +51,9 @@ class LensModel(ABC):
     n_range: ClassVar[tuple[int, int]] = (0, 0)
     #: The coefficients the model takes, as its count error names them.
     layout: ClassVar[str] = ""
+    #: Index of p1 in :attr:`coefficients`, p2 following it (2: OpenCV's order k1, k2, p1, p2, …);
+    #: negative: counted from the end.
+    p1_index: ClassVar[int] = 2
 
     def __post_init__(self) -> None:
         coeffs = tuple(float(c) for c in self.coefficients)
@@ -66,20 +69,18 @@ class LensModel(ABC):
 
     # --- model-specific parts -------------------------------------------------------------
     @abstractmethod
-    def _tangential(self) -> tuple[float, float]: ...
-
-    @abstractmethod
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         """Return g, dg/d(r²)·(r² ≠ 0 safe form is handled by callers), dg/dcoeff (…, n)."""
-
-    @abstractmethod
-    def _tangential_columns(self) -> tuple[int, int]:
-        """Indices of p1 and p2 in the coefficient vector."""
 
     @property
     def tangential_columns(self) -> tuple[int, int]:
         """Indices of the tangential coefficients (p1, p2) in :attr:`coefficients`."""
-        return self._tangential_columns()
+        i = self.p1_index % self.n_coefficients
+        return i, i + 1
+
+    def _tangential(self) -> tuple[float, float]:
+        i1, i2 = self.tangential_columns
+        return self.coefficients[i1], self.coefficients[i2]
 
     # --- shared API -----------------------------------------------------------------------
     @property
@@ -205,7 +206,7 @@ class LensModel(ABC):
         j = np.empty((*x.shape, 2, self.n_coefficients))
         j[..., 0, :] = x[..., None] * dg_dc
         j[..., 1, :] = y[..., None] * dg_dc
-        i1, i2 = self._tangential_columns()
+        i1, i2 = self.tangential_columns
         j[..., 0, i1] = 2 * x * y
         j[..., 0, i2] = r2 + 2 * x * x
         j[..., 1, i1] = r2 + 2 * y * y

@@ -26,12 +26,6 @@ class OpenCV5(LensModel):
     n_range: ClassVar[tuple[int, int]] = (5, 5)
     layout: ClassVar[str] = "5 coefficients (k1, k2, p1, p2, k3)"
 
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[2], self.coefficients[3]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return 2, 3
-
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3 = self.coefficients
         r4, r6 = r2 * r2, r2 * r2 * r2
@@ -49,12 +43,6 @@ class OpenCV8(LensModel):
     name: ClassVar[str] = "opencv8"
     n_range: ClassVar[tuple[int, int]] = (8, 8)
     layout: ClassVar[str] = "8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6)"
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[2], self.coefficients[3]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return 2, 3
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3, k4, k5, k6 = self.coefficients
@@ -84,17 +72,12 @@ class RadialOdd(LensModel):
     name: ClassVar[str] = "radial-odd"
     n_range: ClassVar[tuple[int, int]] = (3, 12)
     layout: ClassVar[str] = "(k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms"
+    p1_index: ClassVar[int] = -2
 
     @property
     def n_radial(self) -> int:
         """Number of radial terms n."""
         return self.n_coefficients - 2
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[-2], self.coefficients[-1]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return self.n_coefficients - 2, self.n_coefficients - 1
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         r = np.sqrt(r2)
@@ -143,6 +126,7 @@ class RadialOddCentred(LensModel):
     name: ClassVar[str] = "radial-odd-centred"
     n_range: ClassVar[tuple[int, int]] = (5, 14)
     layout: ClassVar[str] = "(k1, …, kn, p1, p2, c_x, c_y) with 1 <= n <= 10 radial terms"
+    p1_index: ClassVar[int] = -4
 
     @cached_property
     def inner(self) -> RadialOdd:
@@ -158,12 +142,6 @@ class RadialOddCentred(LensModel):
     def centre_columns(self) -> tuple[int, int]:
         """Indices of c_x, c_y in :attr:`coefficients`."""
         return self.n_coefficients - 2, self.n_coefficients - 1
-
-    def _tangential(self) -> tuple[float, float]:
-        return self.coefficients[-4], self.coefficients[-3]
-
-    def _tangential_columns(self) -> tuple[int, int]:
-        return self.n_coefficients - 4, self.n_coefficients - 3
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         """The inner model's radial factor of the radius about the centre (r² = |x − c|²)."""
