@@ -37,9 +37,9 @@ class PrintedChart:
 
     #: The file written.
     path: Path
-    #: (float, float). (width, height) of the chart on the page, metres.
+    #: (width, height) of the chart on the page, metres.
     chart_size_m: tuple[float, float]
-    #: (float, float). (width, height) of the page: the chart plus the strip below it, metres.
+    #: (width, height) of the page: the chart plus the strip below it, metres.
     page_size_m: tuple[float, float]
     #: Height of the scale-bar strip, metres (0 for PNG).
     strip_m: float

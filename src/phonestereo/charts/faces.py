@@ -47,7 +47,7 @@ class Portrait:
 
     #: File name in ``charts/data/faces``.
     name: str
-    #: (int, int). (width, height) in pixels.
+    #: (width, height) in pixels.
     size: tuple[int, int]
     #: ndarray, shape (2, 2). Iris centres (x, y), eye 0 on the image left.
     pupils_px: Array
@@ -112,7 +112,7 @@ class FaceChart:
     True
     """
 
-    #: (int, int). Cells (cols, rows); faces fill them row by row.
+    #: Cells (cols, rows); faces fill them row by row.
     grid: tuple[int, int] = (4, 2)
     #: Side of a square cell, metres.
     cell_m: float = 0.325

@@ -38,7 +38,7 @@ class TexturedPlane:
     True
     """
 
-    #: (float, float). (width, height) of the plane, metres.
+    #: (width, height) of the plane, metres.
     size_m: tuple[float, float] = (1.0, 1.0)
     #: Random seed; the same seed gives the same texture.
     seed: int = 0

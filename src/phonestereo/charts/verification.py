@@ -65,11 +65,9 @@ class CirclePair:
     centers_uv: Array
     #: Circle radius, metres.
     radius_m: float
-    #: {"dark", "light"}. ``"dark"``: black circles in white squares; ``"light"``: white circles in
-    #: black squares.
+    #: ``"dark"``: black circles in white squares; ``"light"``: white circles in black squares.
     polarity: Literal["dark", "light"]
-    #: {"h", "v"}. ``"h"``: the circles share a row (two columns apart); ``"v"``: they share a
-    #: column.
+    #: ``"h"``: the circles share a row (two columns apart); ``"v"``: they share a column.
     axis: Literal["h", "v"]
     #: ndarray of int, shape (2, 2). (row, col) of the square that holds each circle.
     square_ids: IntArray = field(default_factory=lambda: np.zeros((2, 2), dtype=np.int64))
@@ -209,8 +207,8 @@ class Chessboard:
     ((10, 7), (0.25, 0.175), 54)
     """
 
-    #: (int, int). Inner corners (cols, rows), as OpenCV's ``patternSize``; the board has (cols + 1)
-    #: × (rows + 1) squares.
+    #: Inner corners (cols, rows), as OpenCV's ``patternSize``; the board has
+    #: (cols + 1) × (rows + 1) squares.
     pattern: tuple[int, int] = (9, 6)
     #: Square side, metres.
     square_m: float = 0.025
@@ -275,8 +273,7 @@ class VerificationChart:
     ['h_dark', 'v_light', 'v_dark', 'h_light']
     """
 
-    #: (int, int). Number of squares (cols, rows); at least (10, 8) so the pairs fit with a ring
-    #: around.
+    #: Number of squares (cols, rows); at least (10, 8) so the pairs fit with a ring around.
     squares: tuple[int, int] = (40, 28)
     #: Square side, metres.
     square_m: float = 0.025

@@ -60,7 +60,7 @@ class AnalyticBenchConfig:
     attempt_s: float = 10.0
     #: Hand shake on every capture.
     handheld: bool = True
-    #: (int, int). Chart points (columns, rows).
+    #: Chart points (columns, rows).
     grid: tuple[int, int] = (9, 7)
     #: Fraction of the tele's field of view the grid spans (the wide sees it all).
     field: float = 0.6

@@ -164,9 +164,9 @@ class BlurEstimate:
     #: blur the right image (the left is blurrier), < 0 blur the left; 0 when no blur reduces the
     #: misfit.
     sigma: float
-    #: The window misfit that this blur removes, in units of the pair's noise variance (σ_L² +
-    #: a²σ_R² per pixel): what the blur difference adds to a fitted window's residual variance. The
-    #: matcher's residual test keeps windows up to 16 noise variances.
+    #: The window misfit that this blur removes, in units of the pair's noise variance
+    #: (σ_L² + a²σ_R² per pixel): what the blur difference adds to a fitted window's residual
+    #: variance. The matcher's residual test keeps windows up to 16 noise variances.
     misfit_ratio: float
     #: ρ = Σ |H|²·|f|²·S / Σ |f|²·S over the equalised windows' signal spectrum S: the variance
     #: factor of the blurred image's noise *as seen by the window shift* (the Jacobian is a
@@ -305,13 +305,13 @@ class EqualisedPair:
     left: F32
     #: See ``left`` above.
     right: F32
-    #: (float, float). Gaussian σ added to left and right, px (one of them 0).
+    #: Gaussian σ added to left and right, px (one of them 0).
     added: tuple[float, float]
-    #: (float, float). Per-pixel noise σ of the returned images, DN (the input σ times Σ k² on the
-    #: blurred side): what the residual of a fitted window is compared with.
+    #: Per-pixel noise σ of the returned images, DN (the input σ times Σ k² on the blurred side):
+    #: what the residual of a fitted window is compared with.
     noise: tuple[float, float]
-    #: (float, float). The σ of white noise that would disturb a window's shift as much as the
-    #: returned images' noise does, DN (the input σ times √ρ on the blurred side,
+    #: The σ of white noise that would disturb a window's shift as much as the returned images'
+    #: noise does, DN (the input σ times √ρ on the blurred side,
     #: :attr:`BlurEstimate.shift_noise_factor`): what the Cramér–Rao σ_d uses.
     shift_noise: tuple[float, float]
     estimate: BlurEstimate

@@ -248,17 +248,15 @@ class MatchResult:
     zncc: F64
     #: dict of str to int. Survivors after each stage, in order (``keypoints`` … ``matches``).
     counts: dict[str, int] = field(default_factory=dict)
-    #: (float, float). Per-pixel noise σ of the left and right images used, DN (after blur
-    #: equalisation).
+    #: Per-pixel noise σ of the left and right images used, DN (after blur equalisation).
     noise_sigma: tuple[float, float] = (float("nan"), float("nan"))
-    #: (int, int, int, int). (x, y, w, h) searched, left pixels.
+    #: (x, y, w, h) searched, left pixels.
     roi: tuple[int, int, int, int] = (0, 0, 0, 0)
     #: Wall time of the call.
     seconds: float = 0.0
     #: Empty when there are matches, else why there are none (a data problem, not an error).
     reason: str = ""
-    #: (float, float). Gaussian σ added to the left and right image to equalise their blur, px (one
-    #: is 0).
+    #: Gaussian σ added to the left and right image to equalise their blur, px (one is 0).
     blur_added: tuple[float, float] = (0.0, 0.0)
     #: Both images carried a CFA phase and were filtered before the sub-pixel fit
     #: (``MatchConfig.cfa_filter``).

@@ -91,8 +91,7 @@ class RadialResidualFix:
     (0.3, 0.2, 0.0)
     """
 
-    #: (float, float). Distortion centre in rectified pixels (the wide's principal point,
-    #: rectified).
+    #: Distortion centre in rectified pixels (the wide's principal point, rectified).
     center_px: tuple[float, float]
     #: o: the constant non-disparity offset, px.
     offset_px: float

@@ -47,8 +47,8 @@ Progress = Callable[[int, int, str], None]
 class IpdMode:
     """Where the faces' depths come from (thesis §3.6, eq. 11)."""
 
-    #: {"chart", "population"}. A printed face chart (every face the same known IPD, on one plane),
-    #: or real faces of unknown IPD (the prior's mean IPD, each head's own yaw).
+    #: A printed face chart (every face the same known IPD, on one plane), or real faces of unknown
+    #: IPD (the prior's mean IPD, each head's own yaw).
     kind: Literal["chart", "population"]
     #: The IPD used, metres.
     ipd_m: float

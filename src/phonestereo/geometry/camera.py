@@ -32,7 +32,7 @@ class Camera:
     [1074.5, 749.5]
     """
 
-    #: (int, int). Image (width, height) in pixels.
+    #: Image (width, height) in pixels.
     size: tuple[int, int]
     #: ``fx``, ``fy``: Focal lengths in pixels (> 0).
     fx: float

@@ -65,26 +65,24 @@ class CaptureEntry(pydantic.BaseModel):
     #: Seconds since the camera app started (≥ 0; heating, thesis §3.1). None (left out) when
     #: unknown: the heating gate then falls back to the drift-rate check.
     time_s: float | None = Field(default=None, ge=0.0)
-    #: (float, float, float) or None. Device-frame unit gravity vector (|g| = 1 ± 1e-3).
+    #: Device-frame unit gravity vector (|g| = 1 ± 1e-3).
     gravity: tuple[float, float, float] | None = None
     #: Orientation bucket label, one of :data:`ORIENTATION_BUCKETS` ("landscape",
     #: "landscape-flipped", "portrait", ...; case-normalised); gravity or orientation must be given
     #: (thesis §3.4).
     orientation: str | None = None
-    #: {"face", "verification", "scene", "calibration"}.
     kind: Literal["face", "verification", "scene", "calibration"]
     #: Name of the refocus stack this capture belongs to (thesis §3.5.3).
     focus_group: str | None = None
     #: Index (≥ 0) of the attempt inside the stack.
     focus_attempt: int | None = Field(default=None, ge=0)
-    #: {"manual", "auto", "unknown"}. "unknown" when left out: the fixed-focus gate then gates the
-    #: capture, saying so.
+    #: "unknown" when left out: the fixed-focus gate then gates the capture, saying so.
     focus_mode: Literal["manual", "auto", "unknown"] = "unknown"
     #: Lens position as reported by the module (may be unreliable).
     focus_position: float | None = None
     #: Module temperature in °C, when reported.
     temperature_c: float | None = None
-    #: (int, int, int, int) or None. Region of interest [x, y, w, h] in wide pixels, w, h > 0.
+    #: Region of interest [x, y, w, h] in wide pixels, w, h > 0.
     roi: tuple[int, int, int, int] | None = None
 
     @field_validator("id")

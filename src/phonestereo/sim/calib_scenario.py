@@ -44,19 +44,19 @@ _WIDE_TARGETS = ((-1, -1), (1, 1), (1, -1), (-1, 1), (0, -1), (0, 1), (-1, 0), (
 class CalibrationConfig:
     """Calibration captures: a chessboard in many poses, or one shot of the three-plane chart."""
 
-    #: {"chessboard", "three-plane"}. The variant.
+    #: The variant.
     chart: Literal["chessboard", "three-plane"] = "chessboard"
     #: ``wide_poses``, ``tele_poses``: Board poses spread over the wide image, and poses filling the
     #: tele.
     wide_poses: int = 12
     #: See ``wide_poses`` above.
     tele_poses: int = 6
-    #: (int, int). Inner corners (cols, rows) of the chessboard; cols + rows odd so that its 180°
-    #: turn is visible (the first square is black).
+    #: Inner corners (cols, rows) of the chessboard; cols + rows odd so that its 180° turn is
+    #: visible (the first square is black).
     pattern: tuple[int, int] = (9, 6)
     #: Chessboard square, metres (one-square white margin).
     square_m: float = 0.02
-    #: (float, float). Range of board distances of the wide poses, metres.
+    #: Range of board distances of the wide poses, metres.
     wide_distance_m: tuple[float, float] = (0.3, 0.45)
     #: Board distance of the tele poses (and of the three-plane chart), metres.
     tele_distance_m: float = 0.65

@@ -36,7 +36,7 @@ class CaptureConditions:
 
     #: Capture id (unique in the set).
     id: str
-    #: {"verification", "face", "scene"}. Manifest kind.
+    #: Manifest kind.
     kind: Literal["verification", "face", "scene"]
     #: Seconds since the camera app started (drives heating).
     time_s: float
@@ -44,7 +44,7 @@ class CaptureConditions:
     T_world_device: Transform
     #: Hand shake on this capture (False: tripod).
     handheld: bool
-    #: {"manual", "auto"}. Manual focus at ``focus_m`` or autofocus on a subject at ``focus_m``.
+    #: Manual focus at ``focus_m`` or autofocus on a subject at ``focus_m``.
     focus_mode: Literal["manual", "auto"]
     #: Manual focus distance or autofocus subject distance, metres.
     focus_m: float
@@ -52,9 +52,8 @@ class CaptureConditions:
     focus_group: str | None = None
     #: See ``focus_group`` above.
     focus_attempt: int | None = None
-    #: (float, float) or None. Standard-normal draws of the (wide, tele) lens-position noise to use
-    #: instead of fresh ones: captures that share them have the focus locked (thesis §3.1 heating
-    #: runs).
+    #: Standard-normal draws of the (wide, tele) lens-position noise to use instead of fresh ones:
+    #: captures that share them have the focus locked (thesis §3.1 heating runs).
     lens_noise: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
@@ -76,7 +75,7 @@ class CameraState:
     image_distance_m: float
     #: fx / fx of the calibration-condition true camera (focus breathing, eq. 8's s).
     focal_scale: float
-    #: (float, float). (cx, cy) minus the calibration-condition true camera's, pixels.
+    #: (cx, cy) minus the calibration-condition true camera's, pixels.
     principal_point_shift_px: tuple[float, float]
     #: Autofocus missed the subject.
     af_failed: bool

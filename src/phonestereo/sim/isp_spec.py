@@ -53,9 +53,8 @@ class IspSpec(BaseModel):
     """One camera's ISP (module docstring for the stage order; ``docs/module.md`` for more)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
-    #: {"RGGB", "BGGR", "GRBG", "GBRG"}. Colour of the top-left 2×2 pixels, row by row. Phone
-    #: sensors: mostly RGGB or BGGR (a crop or flip changes it); only the demosaicer's alignment
-    #: depends on it.
+    #: Colour of the top-left 2×2 pixels, row by row. Phone sensors: mostly RGGB or BGGR (a crop or
+    #: flip changes it); only the demosaicer's alignment depends on it.
     cfa_pattern: Literal["RGGB", "BGGR", "GRBG", "GBRG"] = "RGGB"
     #: (float, float, float). Raw response of the R, G, B pixels to a grey (daylight-lit) surface,
     #: relative to the full-well response of the camera's ``sensor`` block; > 0. Typical phone
@@ -70,9 +69,9 @@ class IspSpec(BaseModel):
     #: (float, float, float) or None. R, G, B gains; None = ideal auto white balance on the grey
     #: scene (1 / sensitivity). Typical daylight gains 1.6–2.2 (R), 1 (G), 1.3–1.7 (B).
     white_balance_gains: _Positive3 | None = None
-    #: {"bilinear", "ea", "vng"}. OpenCV demosaicing: bilinear, edge-aware (EA) or variable number
-    #: of gradients (VNG; OpenCV's VNG takes 8-bit input, so the mosaic is rounded to 8 bits before
-    #: it). Phone ISPs use edge-directed methods, closest to "ea".
+    #: OpenCV demosaicing: bilinear, edge-aware (EA) or variable number of gradients (VNG; OpenCV's
+    #: VNG takes 8-bit input, so the mosaic is rounded to 8 bits before it). Phone ISPs use
+    #: edge-directed methods, closest to "ea".
     demosaic: Literal["bilinear", "ea", "vng"] = "ea"
     #: Colour-correction matrix ``(1 + k)·I − k/3·1`` (rows sum to 1, so greys keep their value); k
     #: ≥ 0. Phone CCMs have off-diagonals of −0.2 to −0.6, i.e. k ≈ 0.4–1.0; it raises the luma

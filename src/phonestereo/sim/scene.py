@@ -108,8 +108,8 @@ class Lighting:
 
     #: Overall illumination factor (> 0; values above 1 can saturate the sensor).
     gain: float = 1.0
-    #: (float, float). Relative illumination change from the centre to the right and bottom edges;
-    #: ``|gx| + |gy| < 1`` keeps the light positive.
+    #: Relative illumination change from the centre to the right and bottom edges; ``|gx| + |gy| <
+    #: 1`` keeps the light positive.
     gradient: tuple[float, float] = (0.0, 0.0)
     #: Relative fall-off at the image corners, 0 ≤ v < 1.
     vignetting: float = 0.0
@@ -205,8 +205,7 @@ class ViewPlane:
     #: ndarray, shape (3, 3). Maps a normalised ray (x, y, 1) to (u, v, 1) / Z: chart uv (metres)
     #: and camera depth Z.
     Minv: F64
-    #: (int, int, int, int). Pixel box (x0, y0, x1, y1), ends exclusive, outside which the object is
-    #: not seen.
+    #: Pixel box (x0, y0, x1, y1), ends exclusive, outside which the object is not seen.
     box: tuple[int, int, int, int]
 
 

@@ -82,7 +82,7 @@ class MediaPipeBackend(LandmarkBackend):
     min_tile_px: int = 256
     #: Side of the landmark crop relative to the detected face box.
     crop_scale: float = 2.2
-    #: (int, int). Range of the crop side after resampling, pixels (small faces are upsampled).
+    #: Range of the crop side after resampling, pixels (small faces are upsampled).
     crop_px: tuple[int, int] = (256, 768)
     #: At most this many candidates get landmarks (highest detector score first).
     max_faces: int = 64
@@ -97,8 +97,8 @@ class MediaPipeBackend(LandmarkBackend):
     #: (MediaPipe misses faces rolled by more than ~45°); ``(0, 1, 2, 3)`` for any orientation, at
     #: 4× the time. Results are in the original image's pixels.
     quarter_turns: tuple[int, ...] = (0,)
-    #: (float, float) or None. Search the whole image and one level of tiles (:func:`tile_grid`'s
-    #: ``two_level``) instead of the pyramid down to ``min_tile_px``: ~3× fewer detector runs.
+    #: Search the whole image and one level of tiles (:func:`tile_grid`'s ``two_level``) instead of
+    #: the pyramid down to ``min_tile_px``: ~3× fewer detector runs.
     two_level_tiles: tuple[float, float] | None = None
     #: Tiles larger than this are shrunk by a whole factor (area average, to at most this side)
     #: before the face detector, which sees them at 192 px anyway; the landmarks are still measured
