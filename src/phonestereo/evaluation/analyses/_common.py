@@ -124,6 +124,29 @@ def write_output(
     )
 
 
+#: Fewest attempts that make a refocus stack.
+MIN_ATTEMPTS = 2
+
+
+def refocus_stacks(cs: CaptureSet, analysis: str, what: str) -> dict[str, list[CaptureEntry]]:
+    """The refocus stacks of a set: focus group → its 'verification' captures ordered by
+    attempt (then time), for every group of >= :data:`MIN_ATTEMPTS`; InputError naming what
+    ``analysis`` needs (``what``: the chart and how it was shot) when there is none."""
+    groups: dict[str, list[CaptureEntry]] = {}
+    for c in cs.captures():
+        if c.kind == "verification" and c.focus_group is not None:
+            groups.setdefault(c.focus_group, []).append(c)
+    stacks = {k: sorted(v, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
+              for k, v in groups.items() if len(v) >= MIN_ATTEMPTS}
+    if not stacks:
+        raise InputError(
+            f"the {analysis} analysis needs a refocus stack: >= {MIN_ATTEMPTS} 'verification' "
+            f"captures of {what} sharing a focus_group (one per focus_attempt), e.g. "
+            f"`phonestereo simulate refocus`; {cs.root} has none with >= {MIN_ATTEMPTS} attempts"
+        )
+    return stacks
+
+
 def measure_each(
     caps: Sequence[CaptureEntry], measure: Callable[[CaptureEntry], T], progress: Progress | None
 ) -> list[T]:
@@ -155,6 +178,7 @@ def run_table(
 
 
 __all__ = [
+    "MIN_ATTEMPTS",
     "captures_of_kind",
     "json_clean",
     "label_axes",
@@ -162,6 +186,7 @@ __all__ = [
     "measure_each",
     "open_canonical",
     "open_set",
+    "refocus_stacks",
     "run_table",
     "save_figure",
     "seconds_since",

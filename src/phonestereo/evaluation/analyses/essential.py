@@ -43,8 +43,10 @@ from matplotlib.figure import Figure
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
 from phonestereo.evaluation.analyses._common import (
+    MIN_ATTEMPTS,
     label_axes,
     open_canonical,
+    refocus_stacks,
     run_table,
     seconds_since,
 )
@@ -57,34 +59,17 @@ from phonestereo.fixes.essential_compare import (
     essential_from_points,
 )
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureEntry, CaptureSet
+from phonestereo.io import CaptureSet
 from phonestereo.rectification import Rectification
 
 Progress = Callable[[int, int, str], None]
-MIN_ATTEMPTS = 2
-
-
-def _groups(cs: CaptureSet, name: str) -> dict[str, list[CaptureEntry]]:
-    groups: dict[str, list[CaptureEntry]] = defaultdict(list)
-    for c in cs.captures():
-        if c.kind == "verification" and c.focus_group is not None:
-            groups[c.focus_group].append(c)
-    usable = {k: sorted(v, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
-              for k, v in groups.items() if len(v) >= MIN_ATTEMPTS}
-    if not usable:
-        raise InputError(
-            f"the {name} analysis needs a refocus stack: >= {MIN_ATTEMPTS} 'verification' "
-            "captures of one static chart sharing a 'focus_group' (tripod, heated, manual "
-            f"focus; e.g. `phonestereo simulate refocus`); {cs.root} has none"
-        )
-    return usable
 
 
 def measure_stacks(
     cs: CaptureSet, rect: Rectification, name: str, progress: Progress | None = None
 ) -> tuple[dict[str, list[StackAttempt]], list[dict[str, Any]]]:
     """Chart corners of every attempt of every refocus stack: (group → attempts, capture rows)."""
-    groups = _groups(cs, name)
+    groups = refocus_stacks(cs, name, "one static chart (tripod, heated, manual focus)")
     total = sum(len(v) for v in groups.values())
     stacks: dict[str, list[StackAttempt]] = {}
     rows, done = [], 0

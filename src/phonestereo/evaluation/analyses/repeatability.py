@@ -28,13 +28,13 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import AnalysisOutput
 from phonestereo.evaluation.analyses._common import (
     label_axes,
     map_panel,
     measure_each,
     open_canonical,
+    refocus_stacks,
     run_table,
     save_figure,
     seconds_since,
@@ -51,19 +51,9 @@ Progress = Callable[[int, int, str], None]
 
 # --- shared with the wt-scale analysis ------------------------------------------------------
 def stack_entries(cs: CaptureSet, analysis: str, what: str) -> list[CaptureEntry]:
-    """The largest refocus stack of verification captures (>= 2 attempts), ordered by attempt."""
-    groups: dict[str, list[CaptureEntry]] = {}
-    for c in cs.captures():
-        if c.kind == "verification" and c.focus_group is not None:
-            groups.setdefault(c.focus_group, []).append(c)
-    best = max(groups.values(), key=len, default=[])
-    if len(best) < 2:
-        raise InputError(
-            f"the {analysis} analysis needs a refocus stack: >= 2 'verification' captures of "
-            f"{what} on a tripod sharing a focus_group (one per focus_attempt), e.g. "
-            f"`phonestereo simulate refocus`; {cs.root} has none with >= 2 attempts"
-        )
-    return sorted(best, key=lambda c: (c.focus_attempt or 0, c.time_s or 0.0))
+    """The largest refocus stack of verification captures (>= 2 attempts), ordered by attempt;
+    ``what``: the chart(s) it shows (:func:`refocus_stacks`)."""
+    return max(refocus_stacks(cs, analysis, f"{what} on a tripod").values(), key=len)
 
 
 def focus_check(cs: CaptureSet, caps: list[CaptureEntry]) -> list[dict[str, Any]]:
