@@ -28,7 +28,7 @@ from phonestereo.errors import InputError
 from phonestereo.io import Calibration, Manifest
 from phonestereo.io.importers.android_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import STANDARD_GRAVITY, image_to_platform_K
-from phonestereo.sim.export_common import capture_doc, write_dump
+from phonestereo.sim.export_common import capture_doc, image_name, write_dump
 
 R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 FIRST_FRAME_NS = 5_000_000_000
@@ -93,9 +93,8 @@ def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], 
         cams = {}
         for role in ("wide", "tele"):
             cid = IDS[role]
-            src = Path(c.wide if role == "wide" else c.tele)
             res: dict[str, Any] = {
-                "image": f"images/{c.id}_{cid}{src.suffix}",
+                "image": f"images/{image_name(c, role, IDS)}",
                 "android.sensor.timestamp": FIRST_FRAME_NS + round(c.time_s * 1e9),
                 "android.control.afMode": 0 if c.focus_mode == "manual" else 1,
                 "android.distortionCorrection.mode": 0,

@@ -32,7 +32,7 @@ from phonestereo.io.importers.apple import R_BACK
 from phonestereo.io.importers.apple_lut import apple_distort, image_grid, r_max
 from phonestereo.io.importers.apple_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import image_to_platform_K
-from phonestereo.sim.export_common import capture_doc, write_dump
+from phonestereo.sim.export_common import capture_doc, image_name, write_dump
 
 LUT_SIZE = 42
 FIRST_FRAME_S = 5.0
@@ -128,7 +128,7 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
         cams = {}
         for role in ("wide", "tele"):
             shot: dict[str, Any] = {
-                "image": f"images/{c.id}_{IDS[role]}{Path(getattr(c, role)).suffix}",
+                "image": f"images/{image_name(c, role, IDS)}",
                 "timestamp_s": FIRST_FRAME_S + c.time_s,
                 "focusMode": 0 if c.focus_mode == "manual" else 2,
             }

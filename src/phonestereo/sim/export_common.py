@@ -34,6 +34,12 @@ def capture_doc(
     return {k: v for k, v in doc.items() if v is not None}
 
 
+def image_name(c: CaptureEntry, role: str, ids: dict[str, str]) -> str:
+    """The dump's image file of capture ``c``'s ``role`` camera (``wide`` or ``tele``):
+    ``<capture id>_<platform camera id>.<the set's image suffix>``, in ``images/``."""
+    return f"{c.id}_{ids[role]}{Path(c.wide if role == 'wide' else c.tele).suffix}"
+
+
 def write_dump(
     folder: str | os.PathLike[str],
     session: dict[str, Any],
@@ -57,7 +63,7 @@ def write_dump(
     for c in manifest.captures:
         for role, rel in (("wide", c.wide), ("tele", c.tele)):
             src = set_root / rel
-            dst = out / "images" / f"{c.id}_{ids[role]}{Path(rel).suffix}"
+            dst = out / "images" / image_name(c, role, ids)
             if src.is_file() and not dst.exists():
                 try:
                     os.link(src, dst)
