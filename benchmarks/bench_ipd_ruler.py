@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import argparse
 import json
+from importlib import resources
 from typing import Any
 
 import cv2
 import numpy as np
 from PIL import Image
 
-from phonestereo.charts.faces import _data_dir, portraits
+from phonestereo.charts.faces import portraits
 from phonestereo.features.landmarks import MediaPipeBackend
 
 CANVAS = (1024, 768)
@@ -59,7 +60,11 @@ def measure(sizes: list[float], blurs: list[float], placements: int, seed: int =
     rng = np.random.default_rng(seed)
     backend = _wide_backend()
     table = portraits()
-    grays = {n: np.asarray(Image.open(_data_dir() / n).convert("L")) for n in table}
+    shipped = resources.files("phonestereo.charts") / "data" / "faces"  # the shipped JPEGs
+    grays = {}
+    for n in table:
+        with (shipped / n).open("rb") as fh:
+            grays[n] = np.asarray(Image.open(fh).convert("L"))
     rows = []
     for size in sizes:
         for blur in blurs:
