@@ -69,7 +69,9 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "σ of the wide's focal length at the working focus: a systematic (common-mode) "
         "part of the learned correction's σ (learning/extent.py).",
         "0.4 %: the IPD ruler through the factory wide model reads 0.35–0.43 % long on "
-        "the bench; a store cannot see this error in its own scatter.",
+        "the bench, and the landmark detector alone reads the IPD ~0.3 % short on every "
+        "render (docs/module-random.md, session 10); a store cannot see either in its own "
+        "scatter.",
     ),
     "max_relative_sigma": (
         "relative",
