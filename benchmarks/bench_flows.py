@@ -93,8 +93,8 @@ LEARN_BLOCKS = (
     ("Rectification.from_rig (all)", "rectification/rectify.py", "from_rig"),
     ("cv2.remap / maps (all)", "rectification/rectify.py", "remap"),
     ("refine_lk (all)", "features/subpixel.py", "refine_lk"),
-    ("landmark_disparity._prepare (reference remap, splines)",
-     "learning/landmark_disparity.py", "_prepare"),
+    ("eye_images.prepare (reference remap where read, splines)",
+     "learning/eye_images.py", "prepare"),
 )
 #: Variants of the landmark step (same face images): label → (backend factory, guided by the
 #: tele). The first is the learning flow's; the others are the obvious alternatives.

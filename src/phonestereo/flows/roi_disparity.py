@@ -137,13 +137,14 @@ class _Window:
     reason: str = ""
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=2)
 def _window(
     rig: Rig, mode: str, ref: Rectification, roi: tuple[int, int, int, int], cfg: RoiConfig
 ) -> _Window:
     """The window of ``roi`` (:class:`_Window`). Cached: the learning flow measures the W-T
     scale over the same box (the tele's view) of every face capture of a calibration, and the
-    window's maps (~10 ms at 2000 × 1500) are then built once."""
+    window's maps (~10 ms at 2000 × 1500) are then built once. Two entries: each holds its
+    window's maps and keeps ``ref`` alive (keyed by identity)."""
     grid_raw = roi_grid(roi)
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
     big = _expanded(roi, cfg.expand, rig.wide.size)
