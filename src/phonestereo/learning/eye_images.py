@@ -86,9 +86,18 @@ class FaceReach:
 
         The left box holds every window centre (the pupils ± two grid steps) with the largest
         radius, the gradient filter's reach and a guard; the coefficient box every tele sample
-        at the reachable (d, e); the right box that plus the spline prefilter's reach.
+        at the reachable (d, e); the right box that plus the spline prefilter's reach. Empty
+        boxes (x0 = x1) for pupils or a range that is not finite (nothing is searched there).
+
+        Pupils 60 px apart, d from 8 to 20 px, |e| ≤ 2 px in a 640 × 480 rectified pair:
+
+        >>> reach = FaceReach(np.array([[200.0, 150.0], [260.0, 150.0]]), 8.0, 20.0, 2.0)
+        >>> reach.boxes((640, 480))
+        ((151, 101, 310, 200), (128, 96, 305, 205), (139, 107, 294, 194))
         """
         p = np.asarray(self.pupils, dtype=np.float64).reshape(2, 2)
+        if not np.isfinite([*p.ravel(), self.d_lo, self.d_hi, self.e_max]).all():
+            return (0, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0, 0)
         step = 2 * eye_step(float(np.linalg.norm(p[1] - p[0]))) + 1
         lo, hi = np.floor(p.min(axis=0)) - step, np.ceil(p.max(axis=0)) + step
         a = MAX_RADIUS + TAPS + 2 + _GUARD
