@@ -47,7 +47,7 @@ import numpy as np
 
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.features.landmarks.base import FaceResult
-from phonestereo.flows import application
+from phonestereo.flows import application, roi_disparity
 from phonestereo.flows import learning as learning_flow
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.face_backends import PairBackend
@@ -93,8 +93,8 @@ LEARN_BLOCKS = (
     ("Rectification.from_rig (all)", "rectification/rectify.py", "from_rig"),
     ("cv2.remap / maps (all)", "rectification/rectify.py", "remap"),
     ("refine_lk (all)", "features/subpixel.py", "refine_lk"),
-    ("landmark_disparity._prepare (reference remap, splines)",
-     "learning/landmark_disparity.py", "_prepare"),
+    ("eye_images.prepare (reference remap where read, splines)",
+     "learning/eye_images.py", "prepare"),
 )
 #: Variants of the landmark step (same face images): label → (backend factory, guided by the
 #: tele). The first is the learning flow's; the others are the obvious alternatives.
@@ -362,6 +362,9 @@ def _timed(
     walls, cpus = [], []
     r = None
     for _ in range(repeat):
+        # each verification capture has its own ROI: measure_roi's window is built per capture
+        # (not served by its cache from the previous repeat)
+        roi_disparity._window.cache_clear()
         t0, c0 = time.perf_counter(), time.process_time()
         r = application.run(cfg, inp)
         walls.append(time.perf_counter() - t0)
@@ -422,6 +425,7 @@ def bench_application(
             else round(float(np.nanmedian(d_sgbm)), 3),
             "window_px": [int(box[2]), int(box[3])], "d_max_px": d_max,
         })
+    roi_disparity._window.cache_clear()
     stats = _profile(lambda: [application.run(cfg, inputs(e)) for e in entries])
     variants = []
     base = {r["capture_id"]: r["disparity_px"] for r in rows}

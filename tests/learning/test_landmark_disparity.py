@@ -140,11 +140,12 @@ def test_batched_refinement_equals_face_by_face(chart: dict[str, Any]) -> None:
     """The windows of all faces share one refine_lk call; each window iterates on its own, so
     the result must equal refining each face alone (up to float32 summation order: measured
     1e-10 px in d, 3e-8 in the ZNCC)."""
-    from phonestereo.learning.landmark_disparity import _prepare, _refine_faces
+    from phonestereo.learning.eye_images import prepare
+    from phonestereo.learning.landmark_disparity import _refine_faces
 
     rect = Rectification.from_rig(chart["rig"], "canonical")
     seen = np.isfinite(chart["tele"]).all(axis=(1, 2))
-    img = _prepare(rect, chart["iw"], chart["it"])
+    img = prepare(rect, chart["iw"], chart["it"], None)
     pw = rect.points_wide(chart["wide"][seen])
     d, e = rect.disparity(chart["wide"][seen], chart["tele"][seen])
     faces = [(pw[k], float(d[k].mean()), float(e[k].mean())) for k in range(len(pw))]
@@ -153,3 +154,50 @@ def test_batched_refinement_equals_face_by_face(chart: dict[str, Any]) -> None:
     assert len(together) == len(faces) >= 2
     assert [n for *_, n, _z in together] == [n for *_, n, _z in alone]
     np.testing.assert_allclose(np.array(together), np.array(alone), rtol=1e-6, atol=1e-8)
+
+
+def test_pair_resampled_where_read_equals_whole_remap(chart: dict[str, Any]) -> None:
+    """eye_images.prepare resamples the pair only around the faces' eyes and on the noise rows:
+    there its pixels, spline coefficients and both noise σ must be bit-identical to the whole
+    remap's (cv2.remap treats each pixel on its own; the prefilter's reach is inside the box)."""
+    from phonestereo.learning.eye_images import FaceReach, prepare
+
+    rect = Rectification.from_rig(chart["rig"], "canonical")
+    seen = np.isfinite(chart["tele"]).all(axis=(1, 2))
+    pw = rect.points_wide(chart["wide"][seen])
+    d, e = rect.disparity(chart["wide"][seen], chart["tele"][seen])
+    reach = [FaceReach(pw[k], d[k].mean() - 5, d[k].mean() + 5, abs(e[k].mean()) + 3)
+             for k in range(len(pw))]
+    part = prepare(rect, chart["iw"], chart["it"], reach)
+    whole = prepare(rect, chart["iw"], chart["it"], None)
+    assert (part.sigma_left, part.sigma_right) == (whole.sigma_left, whole.sigma_right)
+    size = rect.wide_rect.size
+    for f in reach:
+        for name, (x0, y0, x1, y1) in zip(("left", "right", "right_coef"), f.boxes(size),
+                                          strict=True):
+            assert x1 > x0 and y1 > y0
+            a, b = getattr(part, name), getattr(whole, name)
+            np.testing.assert_array_equal(a[y0:y1, x0:x1], b[y0:y1, x0:x1], err_msg=name)
+    # most of the pair is not resampled (the faces' boxes and the noise rows only)
+    assert np.mean(part.left == 0) > 0.3
+
+
+def test_landmark_disparity_same_with_whole_remap(
+    chart: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The learning's faces (with tele landmarks and searched from the wide alone) are the
+    same, to the bit, whether the pair is resampled where read or whole (issue 18's speed)."""
+    import phonestereo.learning.landmark_disparity as ld
+    from phonestereo.learning.eye_images import prepare
+
+    rect = Rectification.from_rig(chart["rig"], "canonical")
+    seen = np.isfinite(chart["tele"]).all(axis=(1, 2))
+    fw = faces_from_pupils(chart["wide"], (2000, 1500))
+    tele = (faces_from_pupils(chart["tele"][seen], (2000, 1500)),
+            FaceResult((), (2000, 1500), "truth", "no face found"))
+    part = [landmark_disparity(rect, chart["iw"], chart["it"], fw, t) for t in tele]
+    monkeypatch.setattr(ld, "prepare", lambda r, w, t, _faces: prepare(r, w, t, None))
+    whole = [landmark_disparity(rect, chart["iw"], chart["it"], fw, t) for t in tele]
+    for a, b in zip(part, whole, strict=True):
+        assert len(a) >= 2
+        assert a == b

@@ -16,6 +16,7 @@ of view), the frame the fix store's observations live in.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -32,7 +33,7 @@ from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, major
 from phonestereo.flows.roi_window import coarse_window, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
-from phonestereo.geometry.checks import Array
+from phonestereo.geometry.checks import Array, frozen
 from phonestereo.rectification import Rectification, RectifyOptions, check_pair
 
 F64 = Array
@@ -110,6 +111,78 @@ def _fail(reason: str, grid: F64, counts: dict[str, int], wt: WTScale | None = N
         False, reason, np.zeros((0, 2)), z, z, z, np.zeros(0, bool), float("nan"), None, wt,
         grid, counts,
     )
+
+
+@dataclass(frozen=True)
+class _Window:
+    """The rectified window of a raw-wide ROI and the boxes placed in it (image-independent)."""
+
+    #: The window's rectification (it caches its maps: built once per window, not per capture).
+    win: Rectification
+    #: (2,). Window → reference rectified pixels.
+    shift: F64
+    #: The largest disparity searched, px.
+    d_max: int
+    #: (81, 2). The ROI's sample grid in the reference frame.
+    grid: F64
+    #: (9, 2). The ROI's 3 × 3 grid in the window.
+    box_small: F64
+    #: The expanded ROI's bounding box in the window (x, y, w, h).
+    box: tuple[int, int, int, int]
+    #: The coarse step's boxes, in the order tried.
+    cboxes: tuple[tuple[int, int, int, int], ...]
+    #: (2,). The tele's principal point in the reference frame.
+    c_tele: F64
+    #: Why the ROI cannot be measured ("" when it can).
+    reason: str = ""
+
+
+@lru_cache(maxsize=2)
+def _window(
+    rig: Rig, mode: str, ref: Rectification, roi: tuple[int, int, int, int], cfg: RoiConfig
+) -> _Window:
+    """The window of ``roi`` (:class:`_Window`). Cached: the learning flow measures the W-T
+    scale over the same box (the tele's view) of every face capture of a calibration, and the
+    window's maps (~10 ms at 2000 × 1500) are then built once. Two entries: each holds its
+    window's maps and keeps ``ref`` alive (keyed by identity)."""
+    grid_raw = roi_grid(roi)
+    d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
+    big = _expanded(roi, cfg.expand, rig.wide.size)
+    wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
+    opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
+    win = Rectification.from_rig(rig, mode, opts)
+    shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
+    grid = frozen(win.points_wide(grid_raw) + shift)
+    c_tele = frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])
+    box_small = frozen(win.points_wide(roi_grid(roi, 3)))
+    pts = win.points_wide(roi_grid(big, 3))
+    if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
+        why = "the ROI does not map into the rectified view"
+        return _Window(win, shift, d_max, grid, box_small, (0, 0, 0, 0), (), c_tele, why)
+    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+    rw, rh = win.wide_rect.size
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
+    box = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
+    # in the bounding box), else — or when that one is ambiguous — the bounding box.
+    pts = win.points_wide(roi_grid(wide_box, 3))
+    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
+    bbox = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    inner = inscribed_box(
+        win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
+        win.wide_rect.size,
+    )
+    cboxes = [b for b in (inner, bbox) if b is not None]
+    if inner == bbox:
+        cboxes = [bbox]
+    # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
+    # (a chessboard's period is inside the disparity range) needs the context around it.
+    if box not in cboxes:
+        # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
+        # the ROI's own box is the last try.
+        cboxes.append(box)
+    return _Window(win, frozen(shift), d_max, grid, box_small, box, tuple(cboxes), c_tele)
 
 
 def _match_majority(
@@ -196,54 +269,21 @@ def measure_roi(
     if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > w_img or y + h > h_img:
         raise InputError(f"ROI {list(roi)} is not inside the {w_img}×{h_img} wide image")
     roi = (x, y, w, h)
-    grid_raw = roi_grid(roi)
-    d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
-    big = _expanded(roi, cfg.expand, rig.wide.size)
-    wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
-    opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
-    win = Rectification.from_rig(rig, mode, opts)
-    shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
-    grid = win.points_wide(grid_raw) + shift
+    g = _window(rig, mode, ref, roi, cfg)
+    win, shift, d_max, box, cboxes, c_tele = g.win, g.shift, g.d_max, g.box, g.cboxes, g.c_tele
+    grid = g.grid.copy()
     counts: dict[str, int] = {}
     # the tele's maps and antialias blur on the helper thread while this one prepares the
-    # wide and places the boxes (the images are checked first: a wrong size raises)
+    # wide (the images are checked first: a wrong size raises)
     image_wide, image_tele = check_pair(image_wide, image_tele, rig.wide, rig.tele)
+    if g.reason:
+        return _fail(g.reason, grid, counts)
     pending = background(win.source, "tele", image_tele)
     source_wide = win.source("wide", image_wide)
-    box_small = win.points_wide(roi_grid(roi, 3))
-    if not np.isfinite(box_small).all():
-        return _fail("the ROI does not map into the rectified view", grid, counts)
-    pts = win.points_wide(roi_grid(big, 3))
-    if not np.isfinite(pts).all():
-        return _fail("the ROI does not map into the rectified view", grid, counts)
-    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
-    rw, rh = win.wide_rect.size
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-    box = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
-    # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
-    # in the bounding box), else — or when that one is ambiguous — the bounding box.
-    pts = win.points_wide(roi_grid(wide_box, 3))
-    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-    bbox = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
-    inner = inscribed_box(
-        win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
-        win.wide_rect.size,
-    )
-    cboxes = [b for b in (inner, bbox) if b is not None]
-    if inner == bbox:
-        cboxes = [bbox]
-    # The coarse step correlates a box `coarse_expand` times the ROI: a repetitive texture
-    # (a chessboard's period is inside the disparity range) needs the context around it.
-    if box not in cboxes:
-        # A long tele (×5: a fifth of the wide's field) may not see the context box at all:
-        # the ROI's own box is the last try.
-        cboxes.append(box)
-    c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
     sources = (source_wide, pending.result())
     lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
-    ch = coarse_peak(lw, rt, cboxes, d_max, cfg, center)
+    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
     d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
@@ -259,7 +299,7 @@ def measure_roi(
     counts["coarse_e_px"] = int(e0)
     if two_pass:
         lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
-    slo, shi = box_small.min(0), box_small.max(0)
+    slo, shi = g.box_small.min(0), g.box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
         bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0)

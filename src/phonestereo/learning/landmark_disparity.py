@@ -33,17 +33,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from phonestereo.features.crlb import match_sigma, noise_sigma
+from phonestereo.features.crlb import match_sigma
 from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.features.search import ncc_search
-from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients, refine_lk
+from phonestereo.features.subpixel import PREFILTER_MARGIN, refine_lk
+from phonestereo.learning.eye_images import FaceReach, RectifiedPair, eye_step, prepare
 from phonestereo.learning.face_pairing import DepthMode, ipd_depths, match_faces, pupils_px
 from phonestereo.learning.ipd import IPD_M
 from phonestereo.learning.tele_search import search_start
 from phonestereo.rectification import Rectification
 
 F64 = NDArray[np.float64]
-F32 = NDArray[np.float32]
 
 __all__ = [
     "DepthMode",
@@ -121,36 +121,6 @@ class LandmarkDisparityResult:
         }
 
 
-def _gray32(image: Any) -> F32:
-    a = np.asarray(image)
-    if a.ndim == 3:
-        a = a[..., :3].astype(np.float32) @ np.array([0.114, 0.587, 0.299], np.float32)
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-@dataclass(frozen=True)
-class _Rectified:
-    left: F32
-    right: F32
-    right_coef: F32
-    sigma_left: float
-    sigma_right: float
-
-
-def _prepare(rect: Rectification, image_wide: Any, image_tele: Any) -> _Rectified:
-    lw, rt = rect.remap(image_wide, image_tele)
-    left, right = _gray32(lw), _gray32(rt)
-    # refine_lk filters the template's gradients from ``left`` itself: only the right image
-    # needs its B-spline coefficients (the left's cost 5-10 ms at 12 MP for nothing).
-    return _Rectified(
-        left,
-        right,
-        bspline_coefficients(right),
-        noise_sigma(left),
-        noise_sigma(right),
-    )
-
-
 @dataclass(frozen=True)
 class _EyeWindows:
     """The searched windows of one face: centres (n, 2), offsets from the pupil midpoint
@@ -164,12 +134,12 @@ class _EyeWindows:
     step: int
 
 
-def _eye_windows(img: _Rectified, pupils: F64, d0: float, e0: float) -> _EyeWindows | None:
+def _eye_windows(img: RectifiedPair, pupils: F64, d0: float, e0: float) -> _EyeWindows | None:
     """A 5 × 5 grid of windows around each rectified pupil (2, 2), searched in the tele
     within ±4 px of the landmark disparity ``d0``; None when no window could be searched."""
     ipd = float(np.linalg.norm(pupils[1] - pupils[0]))
-    step = max(2, round(0.06 * ipd))
-    r = int(np.clip(round(0.12 * ipd), 6, 12))
+    step = eye_step(ipd)
+    r = int(np.clip(round(0.12 * ipd), 6, 12))  # ≤ eye_images.MAX_RADIUS
     k = np.arange(-2, 3) * step
     grid = np.stack(np.meshgrid(k, k), axis=-1).reshape(-1, 2)
     xy = np.rint(pupils[:, None, :] + grid[None]).reshape(-1, 2).astype(np.int64)
@@ -194,7 +164,7 @@ def _eye_windows(img: _Rectified, pupils: F64, d0: float, e0: float) -> _EyeWind
 
 
 def _refine_faces(
-    img: _Rectified, faces: list[tuple[F64, float, float]], *, min_zncc: float
+    img: RectifiedPair, faces: list[tuple[F64, float, float]], *, min_zncc: float
 ) -> list[tuple[float, float, float, int, float]]:
     """(d, σ_d, e, n, zncc) per face (rectified pupils (2, 2), landmark d, landmark e).
 
@@ -310,7 +280,14 @@ def landmark_disparity(
     # Faces without a tele partner (Face Mesh failed on a face that fills the tele, the face
     # is cut by the tele's border, the guide missed it) are searched from the wide pupils.
     lone = [i for i in range(len(faces_wide)) if i not in matched and np.isfinite(d_exp[i])]
-    img = _prepare(rect, image_wide, image_tele) if pairs or lone else None
+    # the pair is resampled where the searches below may read: the eye windows ±4 px about
+    # a pair's landmark disparity (rows ± |e| + 2), a lone face's whole gate (rows ± max_e)
+    reach = [FaceReach(pw[i], d_lm[i, j] - 5.0, d_lm[i, j] + 5.0, abs(e_lm[i, j]) + 3.0)
+             for i, j in pairs]
+    for i in lone:
+        tol = d_tol_px + d_tol_rel * abs(float(d_exp[i]))
+        reach.append(FaceReach(pw[i], d_exp[i] - tol - 5.0, d_exp[i] + tol + 5.0, max_e_px + 3.0))
+    img = prepare(rect, image_wide, image_tele, reach) if pairs or lone else None
     out: list[FaceDisparity] = []
     unmatched: list[tuple[int, str]] = []
     starts: list[tuple[int, int, float, float]] = [(i, j, d_lm[i, j], e_lm[i, j]) for i, j in pairs]

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from phonestereo.features.search import ncc_search
+from phonestereo.learning.eye_images import MAX_RADIUS
 from phonestereo.rectification import Rectification
 
 F64 = NDArray[np.float64]
@@ -45,7 +46,7 @@ def search_start(
     if not (np.isfinite(raw).all() and ((raw >= 0) & (raw <= [w - 1, h - 1])).all()):
         return None, "an eye is outside the tele's view"
     ipd = float(np.linalg.norm(pupils[1] - pupils[0]))
-    r = int(np.clip(round(0.3 * ipd), 6, 20))
+    r = int(np.clip(round(0.3 * ipd), 6, MAX_RADIUS))
     xy = np.rint(pupils).astype(np.int64)
     hh, ww = left.shape
     if not ((xy >= r + 2) & (xy < [ww - r - 2, hh - r - 2])).all():

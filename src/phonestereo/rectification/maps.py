@@ -190,6 +190,19 @@ class Source:
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         return np.asarray(out)
 
+    def remap_rows(
+        self, rows: NDArray[np.int64], interpolation: str = DEFAULT_INTERPOLATION
+    ) -> NDArray[Any]:
+        """The rectified image's rows ``rows`` (k,), stacked (k, W'[, C]): the same pixels as
+        those rows of :meth:`remap`."""
+        if interpolation not in _INTERP:
+            raise InputError(
+                f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}"
+            )
+        out = cv2.remap(self.image, self.map_x[rows], self.map_y[rows], _INTERP[interpolation],
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        return np.asarray(out)
+
 
 def source(
     image: NDArray[Any], map_x: NDArray[np.float32], map_y: NDArray[np.float32], shrink: float,
