@@ -137,6 +137,13 @@ class _Window:
     reason: str = ""
 
 
+def _bounding_box(pts: F64, size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The integer box (x, y, w, h) around points (N, 2), inside an image of ``size``."""
+    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, [size[0] - 1, size[1] - 1])
+    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)
+
+
 @lru_cache(maxsize=2)
 def _window(
     rig: Rig, mode: str, ref: Rectification, roi: tuple[int, int, int, int], cfg: RoiConfig
@@ -159,16 +166,10 @@ def _window(
     if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
         why = "the ROI does not map into the rectified view"
         return _Window(win, shift, d_max, grid, box_small, (0, 0, 0, 0), (), c_tele, why)
-    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
-    rw, rh = win.wide_rect.size
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-    box = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    box = _bounding_box(pts, win.wide_rect.size)
     # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
     # in the bounding box), else — or when that one is ambiguous — the bounding box.
-    pts = win.points_wide(roi_grid(wide_box, 3))
-    lo, hi = np.floor(pts.min(0)).astype(int), np.ceil(pts.max(0)).astype(int)
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, [rw - 1, rh - 1])
-    bbox = (int(lo[0]), int(lo[1]), int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1))
+    bbox = _bounding_box(win.points_wide(roi_grid(wide_box, 3)), win.wide_rect.size)
     inner = inscribed_box(
         win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
         win.wide_rect.size,

@@ -10,7 +10,7 @@ capture at 2000 × 1500). The arrays keep the whole rectified size — pixels no
 0 — so every index, border test and value read is that of a whole remap: ``cv2.remap`` treats
 each output pixel on its own, and the spline coefficients are filtered over each box plus the
 prefilter's reach (:data:`~phonestereo.features.spline_gradients.TAPS`), where the FIR
-gives the whole image's values (tests/learning/test_eye_images.py).
+gives the whole image's values (tests/learning/test_landmark_disparity.py).
 """
 
 from __future__ import annotations

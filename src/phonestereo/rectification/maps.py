@@ -178,28 +178,28 @@ class Source:
         box: tuple[int, int, int, int] | None = None,
     ) -> NDArray[Any]:
         """The rectified image, or its part ``box`` = (x0, y0, x1, y1) (ends exclusive)."""
-        if interpolation not in _INTERP:
-            raise InputError(
-                f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}"
-            )
         mx, my = self.map_x, self.map_y
         if box is not None:
             x0, y0, x1, y1 = box
             mx, my = mx[y0:y1, x0:x1], my[y0:y1, x0:x1]
-        out = cv2.remap(self.image, mx, my, _INTERP[interpolation],
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        return np.asarray(out)
+        return self._resample(mx, my, interpolation)
 
     def remap_rows(
         self, rows: NDArray[np.int64], interpolation: str = DEFAULT_INTERPOLATION
     ) -> NDArray[Any]:
         """The rectified image's rows ``rows`` (k,), stacked (k, W'[, C]): the same pixels as
         those rows of :meth:`remap`."""
+        return self._resample(self.map_x[rows], self.map_y[rows], interpolation)
+
+    def _resample(
+        self, map_x: NDArray[np.float32], map_y: NDArray[np.float32], interpolation: str
+    ) -> NDArray[Any]:
+        """``cv2.remap`` of the prepared image through (a part of) its maps."""
         if interpolation not in _INTERP:
             raise InputError(
                 f"interpolation must be one of {list(_INTERP)}, got {interpolation!r}"
             )
-        out = cv2.remap(self.image, self.map_x[rows], self.map_y[rows], _INTERP[interpolation],
+        out = cv2.remap(self.image, map_x, map_y, _INTERP[interpolation],
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         return np.asarray(out)
 
