@@ -191,20 +191,6 @@ class MatchConfig:
     #: (an open question: the LR/RL statistic cannot tell whether their σ_d is honest, see
     #: tests/_support/match_phone.py).
     wide_correlated: bool = True
-    #: EXPERIMENT (reverted): sub-pixel left–right consistency (:mod:`~.match_lr`): each match's
-    #: right window is fitted back to the left image, and the match is kept only if the two
-    #: disparities agree within ``lr_subpixel`` × σ_d; 0 disables it. Clean motorcycle k = 1 / 2 /
-    #: 3: 466 / 551 / 575 matches at 0.0726 / 0.0718 / 0.0724 px (0.0727 off); k = 2 costs clean
-    #: Adirondack 883 → 810 and Piano 663 → 613.
-    lr_subpixel: float = 0.0
-    #: EXPERIMENT (reverted): the residual test's floor is min(floor, max(1, quantile
-    #: ``low_misfit_quantile`` of the windows' misfit / ``typical_low_misfit``)): a processing
-    #: misfit shifts the whole distribution, a scene's misfit spreads it. 0 disables it. At 2.6:
-    #: motorcycle clean 457 at 0.0642 px, every JPEG case passes, but Adirondack denoised 415 →
-    #: 302 and the phone pairs keep ≥ 100 matches on 7 of 16 (15 of 16 off).
-    typical_low_misfit: float = 0.0
-    #: See ``typical_low_misfit``.
-    low_misfit_quantile: float = 0.1
 
     @classmethod
     def fast(cls, **overrides: Any) -> MatchConfig:

@@ -69,9 +69,6 @@ class Fit:
     ok: Mask
     floor: float
     nbound: float
-    #: The floor the residual test uses: ``floor``, or less when the pair's low quantile says
-    #: its misfit is a spread, not a shift (``MatchConfig.typical_low_misfit``).
-    test_floor: float
     noise: tuple[float, float]
     shift_noise: tuple[float, float]
     noise_var: F64
@@ -119,17 +116,9 @@ def fit_windows(
     # pair whose blur difference the equalisation explains reads ≤ 1 (no floor), an ISP's
     # misfit beyond it raises the floor either way (features/misfit.py)
     floor, nbound = 1.0, cfg.max_normalized_residual**2
-    test_floor = floor
     if cfg.misfit_floor:
         input_var = noise_in[0] ** 2 + ref.gain**2 * noise_in[1] ** 2
         floor = misfit_floor(ref.residual_var[ok], input_var[ok], typical=cfg.typical_misfit)
-        test_floor = floor
-        if cfg.typical_low_misfit > 0:
-            low = misfit_floor(
-                ref.residual_var[ok], input_var[ok], typical=cfg.typical_low_misfit,
-                quantile=cfg.low_misfit_quantile,
-            )
-            test_floor = min(floor, low)
         # the normalised residual's bound: raised by the pair's typical value, and to the
         # upper tail of its own windows where their spread is wider (one-sided processing)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -137,7 +126,7 @@ def fit_windows(
         nbound *= misfit_floor(ratio, np.ones(len(ratio)), typical=cfg.typical_normalized)
         tail = misfit_tail(ratio, k=cfg.normalized_tail)
         nbound = max(nbound, tail) if np.isfinite(tail) else nbound
-    return Fit(ref, ok, floor, nbound, test_floor, noise, shift_noise, noise_var)
+    return Fit(ref, ok, floor, nbound, noise, shift_noise, noise_var)
 
 
 #: Windows of the probe fit that can decide a pair is compression-limited (:func:`first_fit`).

@@ -53,7 +53,6 @@ from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_ga
 from phonestereo.features.match_config import MatchConfig, MatchResult
 from phonestereo.features.match_fit import NoiseModel, Windows, first_fit, fit_windows, scaled
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
-from phonestereo.features.match_lr import reverse_fit
 from phonestereo.features.misfit import (
     correlation_factor,
     residual_correlation,
@@ -192,7 +191,6 @@ def match_rectified(
     corr = cfg.correlated_misfit
     fit, wide = first_fit(Windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w),
                           models, cfg, corr)
-    fit_lr, sigma_w = (lc, rc), cfg.sigma_w
     if wide:  # compression-limited: a larger window, the quantiser's high frequencies damped
         l_wide, gain = gaussian_blur(lc, cfg.wide_prefilter_px)
         r_wide = gaussian_blur(rc, cfg.wide_prefilter_px)[0]
@@ -217,8 +215,7 @@ def match_rectified(
             cfg.wide_sigma_w,
         )
         fit = fit_windows(wide_windows, models, cfg, corr)
-        fit_lr, sigma_w = (l_wide, r_wide), cfg.wide_sigma_w
-    ref, ok, floor, nbound = fit.ref, fit.ok.copy(), fit.test_floor, fit.nbound
+    ref, ok, floor, nbound = fit.ref, fit.ok.copy(), fit.floor, fit.nbound
     noise, shift_noise, noise_var = fit.noise, fit.shift_noise, fit.noise_var
     counts["subpixel"] = int(ok.sum())
     with np.errstate(invalid="ignore"):
@@ -242,16 +239,6 @@ def match_rectified(
     with np.errstate(invalid="ignore"):
         ok &= sd <= cfg.max_sigma_d
     counts["sigma"] = int(ok.sum())
-    if cfg.lr_subpixel > 0 and ok.any():
-        sub = np.flatnonzero(ok)
-        rev = reverse_fit(
-            fit_lr[1], bspline_coefficients(fit_lr[0]), xy[idx[sub]], ref.d[sub], ref.e[sub],
-            ref.slant[sub], radius=r, sigma_w=sigma_w, fit_slant=cfg.slant,
-            max_slant=cfg.max_slant, max_iter=cfg.max_iter, tol=cfg.tol,
-        )
-        with np.errstate(invalid="ignore"):
-            ok[sub] = np.abs(rev.delta_d) <= cfg.lr_subpixel * sd[sub]
-    counts["lr_subpixel"] = int(ok.sum())
     sel = np.flatnonzero(ok)
     pts = xy[idx[sel]].astype(np.float64)
     g = _global_filters(pts, ref.d[sel], ref.e[sel], cfg, counts)

@@ -54,9 +54,7 @@ MIN_WINDOWS = 20  # fewer converged windows: white residual assumed
 _FFT = 32  # ≥ M + MAX_LAG for windows up to M = 29 (radius 14); larger windows: next power of 2
 
 
-def misfit_floor(
-    residual_var: F64, model_var: F64, *, typical: float = 1.0, quantile: float = 0.5
-) -> float:
+def misfit_floor(residual_var: F64, model_var: F64, *, typical: float = 1.0) -> float:
     """max(1, median(s² / σ_r²) / typical): the pair's excess misfit in units of its noise model.
 
     ``typical`` is the median ratio a pair without ISP processing already shows (the misfit of
@@ -85,7 +83,7 @@ def misfit_floor(
     ratio = ratio[np.isfinite(ratio)]
     if not len(ratio):
         return 1.0
-    return max(1.0, float(np.quantile(ratio, quantile)) / float(typical))
+    return max(1.0, float(np.median(ratio)) / float(typical))
 
 
 def misfit_tail(ratio: F64, *, k: float = 2.0) -> float:
