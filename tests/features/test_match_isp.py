@@ -28,17 +28,24 @@ needs_data = pytest.mark.skipif(
 # takes a 23 × 23 window (σ_w 5 px) on both images prefiltered by a 0.5 px Gaussian when the
 # pair's misfit floor is ≥ 5 (MatchConfig.wide_floor: compression-limited; with the 15 × 15
 # window Adirondack read 0.0410 / 0.0613, Piano q70 0.1205).
-# The denoised misses are an information loss upstream of the residual tests: NLM h = 5 on an
-# image whose noise is 0.8 DN changes the right image by 6.5 DN rms (median, 7 px windows) where
-# Adirondack's clean matches are lost and 3.5 where they survive; of the clean matches with a
-# window σ of 8–16 DN only 17 % survive (81 % above 16 DN). The NCC score test loses 237 more
-# keypoints than on the clean pair (1694 → 1333 against 1731 → 1607) and the sub-pixel fit 143
-# more (796 → 521: 229 windows still move after 10 iterations, contracting by 0.8 per step,
-# because the left's gradients carry texture the right no longer has). Tried and not adopted:
-# 30 iterations (535 matches at 0.0393 px, over the limit, and motorcycle clean 0.0727 → 0.0752),
-# NCC on both images smoothed by 0.5 / 1 px (the score test recovers, uniqueness loses them;
-# Adirondack clean 883 → 855 / 776), a symmetric prefilter before the fit (no gain in
-# convergence), min_score 0.7 (Adirondack denoised 440)
+# The denoised misses are an information loss upstream of the residual tests: NLM h = 5 on an image
+# whose noise is 0.8 DN changes the right image by 6.5 DN rms (median, 7 px windows) where
+# Adirondack's clean matches are lost and 3.5 where they survive; of the clean matches with a window
+# σ of 8–16 DN only 17 % survive (81 % above 16 DN). The NCC score test loses 237 more keypoints
+# than on the clean pair (1694 → 1333 against 1731 → 1607) and the sub-pixel fit 143 more (796 →
+# 521: 229 windows still move after 10 iterations, contracting by 0.8 per step, because the left's
+# gradients carry texture the right no longer has). The clean matches themselves
+# (benchmarks/bench_match_denoised.py): of Adirondack's 883, 222 have no NCC ≥ min_score (0.8) left
+# in the denoised pair's band and 64 more fail the uniqueness test, so at most 597 (68 %, under the
+# 70 %) leave the search whatever the sub-pixel stage does; Piano's search leaves at most 521 of 663
+# (79 %: 52 below the score, 90 ambiguous), the stages after it lose 123 more; fitted with the roles
+# swapped (Jacobian from the denoised image) the windows only that fit converges read 0.227 px
+# (Piano 0.187). Tried and not adopted: 30 iterations (535 matches at 0.0393 px, over the limit, and
+# motorcycle clean 0.0727 → 0.0752; 20: Adirondack 508 of 885 at 0.0385, Piano 447 of 667, 67 %,
+# motorcycle clean 0.0746), uniqueness 0.95 (Piano 468 of 771, 61 %), NCC on both images smoothed by
+# 0.5 / 1 px (the score test recovers, uniqueness loses them; Adirondack clean 883 → 855 / 776), a
+# symmetric prefilter before the fit (no gain in convergence), min_score 0.7 (Adirondack denoised
+# 440)
 MISSES = {
     ("Adirondack", "denoised"): "keeps 47 % (415 of 883), median 0.0343 px",
     ("Piano", "denoised"): "keeps 60 % (398 of 663), median 0.0738 px",
@@ -71,11 +78,32 @@ def test_degraded_pair_keeps_matches_and_accuracy(clean: dict, scene: str, case:
     assert out["within_0.5px"] >= 0.90, out
 
 
+# The clean pairs' figures before the ISP work (issue #16: no more than 5 % worse). Adirondack
+# and Piano read 883 / 0.0188 px and 663 / 0.0673 px, as before (their floors stay at 1). The
+# motorcycle read 418 matches at 0.063 px before the misfit floor and reads 605 at 0.0727 px
+# now: its own misfit (14 noise variances, growing with contrast) sets a floor of 2.3 that
+# admits 149 windows at 0.099 px (the other 456 read 0.064). Tried and not adopted (measured,
+# docs/matching.md "What the matcher cannot recover"): a sub-pixel left-right check (k = 1-3:
+# 0.0718-0.0726 px; k = 2 costs clean Adirondack 883 -> 810), residual-structure statistics
+# (none separates the 149 windows: AUC 0.49-0.55), and a floor from the misfit's 10th
+# percentile (motorcycle 457 at 0.0642 px, but Adirondack denoised 415 -> 302 and the phone
+# pairs >= 100 matches on 7 of 16).
+CLEAN_BEFORE = [("Adirondack", 883, 0.0188), ("Piano", 663, 0.0673)]
+CLEAN_MISS = "605 matches at 0.0727 px against 418 at 0.063 before (limit 0.0662)"
+
+
 @needs_data
-@pytest.mark.parametrize(("scene", "count", "median"), [("Adirondack", 883, 0.0188)])
+@pytest.mark.parametrize(
+    ("scene", "count", "median"),
+    [
+        *CLEAN_BEFORE,
+        pytest.param(
+            "motorcycle", 418, 0.063, marks=pytest.mark.xfail(strict=True, reason=CLEAN_MISS)
+        ),
+    ],
+)
 def test_clean_pair_unchanged(scene: str, count: int, median: float) -> None:
-    # today's main measured 883 matches at 0.0188 px; the floor must not cost a clean pair
-    # more than 5 % (the pair's median residual is 2 noise variances: the floor stays at 1)
+    # the floor must not cost a clean pair more than 5 % of its matches or of its median
     out = isp.degraded(scene, "clean")
     assert out["matches"] >= 0.95 * count and out["median_abs_err_px"] <= 1.05 * median, out
 
