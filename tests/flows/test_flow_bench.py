@@ -10,6 +10,9 @@ from typer.testing import CliRunner
 
 from phonestereo.cli import app
 from phonestereo.evaluation.bench import run_bench
+from phonestereo.flows import learning
+from phonestereo.flows.config import FlowConfig
+from phonestereo.io import load_calibration, load_capture_set
 from phonestereo.sim.module import load_module
 from phonestereo.sim.scenarios import BenchConfig, LearningConfig, VerificationConfig, plan_scenario
 from phonestereo.sim.writer import write_capture_set
@@ -72,3 +75,30 @@ def test_depth_without_a_store_or_with_a_cold_capture_says_why(
     assert r.exit_code == 2 and "learn" in r.output
     r = runner.invoke(app, ["evaluate", str(tmp_path)])
     assert r.exit_code == 2
+
+
+def test_radial_residual_is_learned_stored_and_applied(bench_set: Path, tmp_path: Path) -> None:
+    # FlowConfig.radial_residual (thesis §3.2's non-disparity-axis fix): each face capture's fit
+    # goes into the store with its observations, and `depth` applies the pooled fit exactly as
+    # the in-memory bench does (same depths up to the CLI JSON's 1 µm rounding: one code path,
+    # two sources).
+    runner = CliRunner()
+    store, cal = tmp_path / "fixes.sqlite", bench_set / "calibration.json"
+    config = tmp_path / "flow.json"
+    config.write_text(json.dumps({"radial_residual": True}))
+    common = ["--calibration", str(cal), "--store", str(store), "--config", str(config), "--json"]
+    r = runner.invoke(app, ["learn", str(bench_set), *common])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["depth", str(bench_set), *common])
+    assert r.exit_code == 0, r.output
+    stored = {x["capture_id"]: x for x in json.loads(r.stdout)["results"]}
+    cfg = FlowConfig(radial_residual=True)
+    lr = learning.run(cfg, load_capture_set(bench_set), load_calibration(cal), None)
+    fits = [c.radial for c in lr.captures if c.ok]
+    # a cubic P(r) about the tele's centre lowers the spread of e over each capture's whole view
+    assert fits and all(f is not None and f.rms_after_px < f.rms_before_px for f in fits), fits
+    res = run_bench(bench_set, cfg)
+    for c in res["captures"]:
+        x = stored[c["capture_id"]]
+        assert x["stages"]["radial_residual"]["n_used"] == len(fits)
+        assert abs(x["depth_m"] - c["depth_m"]) <= 1e-6, (x["depth_m"], c["depth_m"])

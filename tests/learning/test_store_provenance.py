@@ -81,7 +81,7 @@ def test_store_written_by_old_main_is_migrated(tmp_path: Path) -> None:
     path = tmp_path / "fixes.sqlite"
     shutil.copy(FIXTURE_V2, path)
     with FixStore(path) as st:
-        assert st.schema_version == SCHEMA_VERSION == 3
+        assert st.schema_version == SCHEMA_VERSION == 4
         assert st.backup_path == tmp_path / "fixes.sqlite.v2.bak"
         s = st.stats()
         # every row the old code wrote is kept: 3 captures (one empty), 5 + 4 observations

@@ -25,6 +25,7 @@ from phonestereo.flows.learning import stack_corrections, store_context
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store_open import open_for_reading
+from phonestereo.learning.store_radial import radial_fits
 
 
 def _bar(label: str, console: Console, disable: bool) -> Progress:
@@ -73,9 +74,10 @@ def depth(
         with open_for_reading(store) as fs:
             choice = fs.context_for_applying(store_context(cfg, cal.rig))
             obs = fs.observations(context_id=-1 if choice.id is None else choice.id)
+            radial = radial_fits(fs, -1 if choice.id is None else choice.id)
         if choice.warning:
             console.print(f"[yellow]warning:[/yellow] {escape(choice.warning)}")
-        corrector = Corrector(obs, cfg) if len(obs) else None
+        corrector = Corrector(obs, cfg, radial_fits=radial) if len(obs) else None
         entries = [c for c in cs.captures() if c.kind != "face"]
         if capture is not None:
             entries = [cs.get(capture)]

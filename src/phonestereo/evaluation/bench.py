@@ -35,6 +35,7 @@ from phonestereo.flows.learning import CachedBackend, default_backend, stack_cor
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning.store import FixStore
+from phonestereo.learning.store_radial import radial_fits
 from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, load_ground_truth
 
 Progress = Callable[[str, int, int], None]
@@ -122,7 +123,10 @@ def learn_and_apply(
         if store is not None
         else [o for c in lr.captures for o in c.observations]
     )
-    corrector = Corrector(obs, config) if len(obs) else None
+    radial = (
+        radial_fits(store, lr.context_id) if store is not None else [c.radial for c in lr.captures]
+    )
+    corrector = Corrector(obs, config, radial_fits=radial) if len(obs) else None
     res = apply_all(
         config, cs, corrector,
         progress=None if progress is None else (lambda k, n: progress("application", k, n)),
@@ -214,7 +218,9 @@ def run_bench(
         rows_l = []
         for name in LOOKUPS:
             cfg_l = replace(cfg, lookup=name)
-            res_l = apply_all(cfg_l, cs, Corrector(obs_all, cfg_l))
+            res_l = apply_all(
+                cfg_l, cs, Corrector(obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures])
+            )
             sc = _score(_rows(cs, res_l))
             rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],
                            "gated": sc["gated"]})

@@ -138,6 +138,9 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     if ref is None or ref.mode != config.mode:
         ref = reference_rectification(inputs.calibration.rig, config.mode)
     box = (int(roi[0]), int(roi[1]), int(roi[2]), int(roi[3]))
+    radial = inputs.corrector.radial if inputs.corrector is not None else None
+    if radial is not None:  # §3.2, learned (fixes/radial_residual.py)
+        stages["radial_residual"] = radial.to_dict()
     m = measure_roi(
         rig,
         inputs.image_wide,
@@ -147,6 +150,7 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         ref,
         mode=config.mode,
         wt_scale=config.wt_scale,
+        radial=radial,
     )
     stages["measure"] = {"counts": m.counts, "ok": m.ok, "reason": m.reason}
     if m.wt is not None:

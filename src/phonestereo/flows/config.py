@@ -7,12 +7,15 @@ table of the bench switches them off one at a time).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from phonestereo.errors import InputError
+from phonestereo.fixes.distortion import RadialResidualFix
+from phonestereo.fixes.radial_residual import pool_radial
 from phonestereo.flows.roi_disparity import RoiConfig
 from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
@@ -32,6 +35,7 @@ FIXES = (
     "orientation_buckets",
     "learned_correction",
     "wide_breathing",
+    "radial_residual",
 )
 
 
@@ -84,6 +88,13 @@ class FlowConfig:
     #: calibration and use (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the
     #: calibration gives the wide's physical focal length and its focus distance, else a no-op).
     wide_breathing: bool = True
+    #: A fix, off by default: the residual radial distortion of the rectified pair (thesis §3.2's
+    #: non-disparity-axis fix, :mod:`~phonestereo.fixes.radial_residual`), fitted to each face
+    #: capture's whole-view matches and taken out of the faces' and, pooled, the ROI's
+    #: disparities. Off because alone it uncovers the IPD ruler's own bias: on the random modules
+    #: it cuts the worst sets' error (random-1006 1.14 → 0.34 %) but raises the good ones'
+    #: (random-1015 0.37 → 0.79 %; docs/module-random.md, session 11).
+    radial_residual: bool = False
     #: Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele shares
     #: with the wide (not the faces' box): the scale's lever is the view's height.
     face_wt_keypoints: int = 1500
@@ -130,6 +141,8 @@ class FlowConfig:
         d = asdict(self)
         for k in APPLY_ONLY:
             d.pop(k)
+        if not d["radial_residual"]:  # off learns what stores made before the knob learned
+            d.pop("radial_residual")
         return d
 
 
@@ -165,8 +178,11 @@ class Corrector:
     """
 
     def __init__(
-        self, observations: Any, config: FlowConfig, principal_point_px: Any = None
+        self, observations: Any, config: FlowConfig, principal_point_px: Any = None,
+        radial_fits: Sequence[RadialResidualFix | None] = (),
     ) -> None:
+        #: The learning captures' residual radial distortion pooled (``radial_residual``), or None.
+        self.radial = pool_radial(radial_fits) if config.radial_residual else None
         obs = as_observation_array(observations).copy()
         if not config.orientation_buckets and obs.size:
             obs["orientation"] = ALL_BUCKETS

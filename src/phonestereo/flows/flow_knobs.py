@@ -104,6 +104,17 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "pixels); the random periscopes read +0.3–1.3 % long without it (random-1005, 5.85 mm "
         "wide calibrated at 0.6 m: +1.26 % mean → +0.58 %).",
     ),
+    "radial_residual": (
+        "bool",
+        "Take the rectified pair's residual radial distortion out of every disparity (thesis "
+        "§3.2's non-disparity-axis fix, fixes/radial_residual.py): P(r) about the tele's "
+        "principal point, fitted to each face capture's whole-view matches' e, corrects its "
+        "faces; pooled over the learning captures, the ROI's matches before its W-T scale.",
+        "Off: the factory's even-order lens model leaves this residual on an odd lens and it "
+        "offsets the IPD ruler's own bias; alone the fix cuts the worst random modules' "
+        "error (random-1006 1.14 → 0.34 %) and raises the good ones' (random-1015 0.37 → "
+        "0.79 %), docs/module-random.md, session 11.",
+    ),
     "face_wt_keypoints": (
         "count",
         "Keypoints of the face captures' W-T scale fit, which runs over the whole view the "

@@ -5,7 +5,9 @@ Blocks per face capture, in order: **gates** (heated, fixed focus, orientation;
 :mod:`~phonestereo.flows.focus_stack`) → **landmarks** in both cameras → **depth from IPD**
 (eq. 11) → **landmark disparity** (:func:`~phonestereo.learning.learn.learn_capture`) →
 **W-T scale** over everything the tele sees (§3.5.1, the same block as the application phase,
-so learned and applied disparities share one convention) → **observations into the fix
+so learned and applied disparities share one convention) → with ``radial_residual`` on, the
+**residual radial distortion** fitted to that view's non-disparity error (§3.2,
+:mod:`~phonestereo.fixes.radial_residual`) → **observations into the fix
 store**, one transaction per capture, under the store's context for this calibration and
 flow configuration (:mod:`~phonestereo.learning.store_contexts`) and keyed by the capture
 set's fingerprint. Captures that do not pass are skipped with the reason.
@@ -23,8 +25,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
+import numpy as np
+
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend
+from phonestereo.fixes.distortion import RadialResidualFix
+from phonestereo.fixes.radial_residual import correct_matches, fit_capture_radial
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_backend
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
@@ -99,6 +105,8 @@ class CaptureLearning:
     stages: dict[str, Any] = field(default_factory=dict)
     gates: tuple[Gate, ...] = ()
     seconds: float = 0.0
+    #: The capture's residual radial distortion (``FlowConfig.radial_residual``), or None.
+    radial: RadialResidualFix | None = None
 
     @property
     def ok(self) -> bool:
@@ -194,6 +202,7 @@ def learn_face_capture(
     if not obs:
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
                                time.perf_counter() - t0)
+    radial = None
     if config.wt_scale:
         box = _wt_box(rect)
         wt = None
@@ -213,9 +222,18 @@ def learn_face_capture(
             replace(o, d_measured_px=float(wt.correct_disparity(o.x_px, o.d_measured_px)))
             for o in obs
         )
+        if config.radial_residual:  # §3.2: the e of the whole view's matches gives P(r)
+            radial = fit_capture_radial(m.xy, m.e, wt.center_px)
+            stages["radial_residual"] = None if radial is None else radial.to_dict()
+            if radial is not None:
+                xy = np.array([[o.x_px, o.y_px] for o in obs])
+                d_obs = [o.d_measured_px for o in obs]
+                d = correct_matches(radial, xy, d_obs, np.zeros(len(obs)))[0]
+                obs = tuple(replace(o, d_measured_px=float(v)) for o, v in zip(obs, d, strict=True))
     if config.orientation_buckets is False:
         obs = tuple(replace(o, orientation="all") for o in obs)
-    return CaptureLearning(entry.id, obs, "", "", stages, tuple(gates), time.perf_counter() - t0)
+    return CaptureLearning(entry.id, obs, "", "", stages, tuple(gates), time.perf_counter() - t0,
+                           radial)
 
 
 def stack_corrections(
@@ -318,6 +336,7 @@ def run(
                 context_id=context_id,
                 set_fingerprint=fingerprint,
                 set_folder=str(cs.root.resolve()),
+                radial=r.radial,
             )
         elif r.ok:
             n_obs += len(r.observations)

@@ -24,6 +24,8 @@ import numpy as np
 from phonestereo.errors import InputError
 from phonestereo.features._threads import background
 from phonestereo.features.matching import match_rectified
+from phonestereo.fixes.distortion import RadialResidualFix
+from phonestereo.fixes.radial_residual import correct_matches
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
 from phonestereo.flows.band_gate import band_reason, band_split
 from phonestereo.flows.blur_equalise import equalise_blur
@@ -232,6 +234,7 @@ def measure_roi(
     *,
     mode: str | None = None,
     wt_scale: bool = True,
+    radial: RadialResidualFix | None = None,
 ) -> RoiMeasurement:
     """Disparity of the surface in a raw-wide ROI (Fig. 4-2's measuring blocks).
 
@@ -251,6 +254,9 @@ def measure_roi(
         reference's mode, else ``"canonical"``.
     wt_scale : bool
         Fit and apply the W-T scale in the ROI (§3.5.1).
+    radial : RadialResidualFix, optional
+        A learned residual radial distortion (§3.2, :mod:`~phonestereo.fixes.radial_residual`)
+        taken out of the matches' d and e before the W-T scale is fitted.
 
     Returns
     -------
@@ -329,8 +335,11 @@ def measure_roi(
         return _fail(
             f"{len(idx)} matches on the majority surface (< {cfg.min_matches})", grid, counts
         )
-    xy = res.xy[idx] + shift
-    d, e, sd = res.d[idx], res.e[idx], res.sigma_d[idx]
+    xy_all, d_all, e_all = res.xy + shift, res.d, res.e
+    if radial is not None:
+        d_all, e_all = correct_matches(radial, xy_all, d_all, e_all)
+    xy = xy_all[idx]
+    d, e, sd = d_all[idx], e_all[idx], res.sigma_d[idx]
     wt = None
     if wt_scale:
         # Tele points in the (possibly pre-scaled, coarse_gate) window: the fit finds what
@@ -341,7 +350,7 @@ def measure_roi(
         wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     plane = fit_plane(xy, d, sd)
     if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
-        split = band_split(res.xy + shift, res.d, res.e, m2, fit, plane.predict, cfg)
+        split = band_split(xy_all, d_all, e_all, m2, fit, plane.predict, cfg)
         counts.update(split)
         why = band_reason(split, cfg)
         if why:

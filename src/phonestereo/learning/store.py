@@ -27,6 +27,7 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import sqlite3
@@ -38,6 +39,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from phonestereo.errors import InputError, StoreError
+from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.learning.observation import (
     FIELDS,
     TEXT_FIELDS,
@@ -213,6 +215,7 @@ class FixStore:
         context_id: int | None = None,
         set_fingerprint: str = UNRECORDED,
         set_folder: str = "",
+        radial: RadialResidualFix | None = None,
     ) -> int:
         """Store the observations learned from one capture, in one transaction.
 
@@ -224,7 +227,7 @@ class FixStore:
         ``context_id`` comes from :meth:`context_for_learning` (None: an unrecorded context,
         for tests and imports), ``set_fingerprint`` from
         :func:`~phonestereo.io.fingerprint.capture_set_fingerprint`; ``set_folder`` is shown
-        by ``store stats``.
+        by ``store stats``; ``radial``: the capture's radial fit (``store_radial`` reads it).
 
         Returns
         -------
@@ -249,6 +252,8 @@ class FixStore:
                 tuple(None if isinstance(v, float) and math.isnan(v) else v for v in ob.as_row())
             )
 
+        radial_json = None if radial is None else json.dumps(radial.to_dict())
+
         def write(conn: sqlite3.Connection) -> int:
             ctx = context_id
             if ctx is None:
@@ -263,10 +268,10 @@ class FixStore:
                 key,
             )
             conn.execute(
-                "INSERT INTO captures VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT DO UPDATE SET "
+                "INSERT INTO captures VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO UPDATE SET "
                 "set_folder = excluded.set_folder, learned_unix = excluded.learned_unix, "
-                "n_observations = excluded.n_observations",
-                (*key, str(set_folder), time.time(), len(rows)),
+                "n_observations = excluded.n_observations, radial = excluded.radial",
+                (*key, str(set_folder), time.time(), len(rows), radial_json),
             )
             conn.executemany(_INSERT, [(ctx, set_fingerprint, *r) for r in rows])
             return len(rows)
@@ -364,8 +369,7 @@ class FixStore:
 
     # --- maintenance ----------------------------------------------------------------------
     def export(self, out: str | os.PathLike[str]) -> int:
-        """Write every observation to ``out`` (``.csv`` or ``.json``); returns the row count
-        (:func:`~phonestereo.learning.store_stats.export_store`)."""
+        """Write every observation to ``out`` (``.csv`` or ``.json``); the row count."""
         return export_store(self, out)
 
     def vacuum(self) -> tuple[int, int]:

@@ -21,7 +21,7 @@ from phonestereo.errors import StoreError
 T = TypeVar("T")
 
 #: The schema this code writes; older files are migrated on open.
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: The first 16 bytes of every SQLite database file.
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -82,6 +82,9 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
         "CREATE INDEX observations_key ON observations(context_id, set_fingerprint, capture_id)",
         "CREATE INDEX observations_bucket ON observations(context_id, orientation, focus_group)",
     ),
+    (  # 3 → 4: each capture's residual radial distortion (FlowConfig.radial_residual), JSON
+        "ALTER TABLE captures ADD COLUMN radial TEXT",
+    ),
 )
 #: The current schema from nothing (a new file gets it directly, not through every migration:
 #: no dropped tables, compact pages). tests/learning/test_store_migration.py checks that it
@@ -94,6 +97,7 @@ CURRENT_SCHEMA: tuple[str, ...] = (
         for sql in (MIGRATIONS[2][2], MIGRATIONS[2][4])
     ),
     *MIGRATIONS[2][-2:],
+    *MIGRATIONS[3],
 )
 if len(MIGRATIONS) != SCHEMA_VERSION:  # pragma: no cover - a developer error
     raise RuntimeError("store_schema: one migration per schema version is required")

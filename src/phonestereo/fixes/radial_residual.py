@@ -1,0 +1,133 @@
+"""The non-disparity-axis fix in the flows (thesis §3.2): a learned residual radial distortion.
+
+A factory describes a lens whose radial polynomial has odd terms with OpenCV's even-order model
+(§3.2 reason 2); its distortion also moves with focus (reason 3). What is left after
+rectification is a radial displacement δ(q) = P(r)·û about the tele's principal point, the same
+in e (its y part) as in d (its x part), and it differs between the sensor positions where the
+faces were learned and where a chart is measured, which the learned correction's smooth field
+does not carry (docs/module-random.md, session 11). The flows therefore, when
+``FlowConfig.radial_residual`` is on:
+
+- in the learning, fit P (:class:`~phonestereo.fixes.distortion.RadialResidualFix`, degree
+  :data:`RADIAL_DEGREE`) to the non-disparity error e of each face capture's whole-view W-T
+  matches (:func:`fit_capture_radial`) and correct that capture's face disparities by −δ_x;
+- in the application, correct the ROI's matches (d and e) by the fit pooled over the learning
+  captures (:func:`pool_radial`: the median curve) before the ROI's own W-T scale is fitted
+  (:func:`correct_matches`).
+
+Beyond the largest learned radius P is held at its value there (a polynomial is not
+extrapolated).
+
+Examples
+--------
+Two captures see the same residual, 0.3·(r/500)² px, through e:
+
+>>> rng = np.random.default_rng(1)
+>>> q = rng.uniform(0.0, 1000.0, size=(400, 2))
+>>> r, u = radial_geometry(q, (500.0, 500.0))
+>>> fits = [fit_capture_radial(q, u[:, 1] * 0.3 * (r / 500.0) ** 2 + rng.normal(0, 0.01, 400),
+...                            (500.0, 500.0)) for _ in range(2)]
+>>> pooled = pool_radial(fits)
+>>> round(float(pooled.radial(500.0)), 2)
+0.3
+>>> d, e = correct_matches(pooled, [[1000.0, 500.0]], [10.0], [0.0])
+>>> round(float(d[0]), 2), round(float(e[0]), 2)     # δ at r = 500 px along +x
+(9.7, 0.0)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from phonestereo.errors import InputError
+from phonestereo.fixes.distortion import RadialResidualFix, radial_geometry
+from phonestereo.geometry.checks import as_points
+
+#: n of P(r): a cubic follows an odd lens's residual over the tele's field (degree 4 chased the
+#: e noise of one capture's matches on the random modules; 2 left a third of the residual).
+RADIAL_DEGREE = 3
+#: Fewest finite matches for one capture's fit (its e scatters ~0.1 px per match).
+MIN_MATCHES = 50
+
+
+def fit_capture_radial(
+    xy: Any, e: Any, center: Any, *, degree: int = RADIAL_DEGREE
+) -> RadialResidualFix | None:
+    """P(r) of one capture from its matches' non-disparity error, or None when the matches are
+    too few or the fit does not lower the spread of e.
+
+    Parameters
+    ----------
+    xy : array_like, shape (N, 2)
+        Rectified wide pixels of the matches (after the W-T scale).
+    e : array_like, shape (N,)
+        Their non-disparity error, px.
+    center : (x, y)
+        The tele's principal point, rectified px (the W-T scale's centre).
+    degree : int
+        n of P.
+    """
+    q = as_points(xy, 2, "xy").reshape(-1, 2)
+    ev = np.asarray(e, dtype=np.float64).reshape(-1)
+    ok = np.isfinite(q).all(axis=1) & np.isfinite(ev)
+    if ok.sum() < MIN_MATCHES:
+        return None
+    try:
+        fit = RadialResidualFix.fit(q[ok], ev[ok], center, degree=degree)
+    except InputError:
+        return None
+    return fit if fit.rms_after_px < fit.rms_before_px else None
+
+
+def pool_radial(
+    fits: Sequence[RadialResidualFix | None], *, degree: int = RADIAL_DEGREE, samples: int = 64
+) -> RadialResidualFix | None:
+    """The captures' fits pooled: the median of their P(r) over a radius grid up to the smallest
+    fitted radius, fitted again by P of ``degree`` (no offset: the ROI fits its own). None
+    without a fit."""
+    good = [f for f in fits if f is not None]
+    if not good:
+        return None
+    rho = min(f.radius_scale_px for f in good)
+    r = np.linspace(0.0, rho, samples)
+    curve = np.median(np.stack([f.radial(r) for f in good]), axis=0)
+    A = np.stack([(r / rho) ** k for k in range(1, degree + 1)], axis=1)
+    coef = np.linalg.lstsq(A, curve, rcond=None)[0]
+    res = A @ coef - curve
+    return RadialResidualFix(
+        good[0].center_px, 0.0, tuple(float(a) for a in coef), float(rho),
+        float(np.std(curve)), float(np.sqrt(np.mean(res**2))), len(good), len(fits),
+    )
+
+
+def correct_matches(fix: RadialResidualFix, xy: Any, d: Any, e: Any) -> tuple[Any, Any]:
+    """(d, e) of rectified matches less δ(q) = P(min(r, ρ))·û, px (N,) each."""
+    q = as_points(xy, 2, "xy").reshape(-1, 2)
+    r, u = radial_geometry(q, fix.center_px)
+    p = fix.radial(np.minimum(r, fix.radius_scale_px))
+    dv = np.asarray(d, dtype=np.float64).reshape(-1) - p * u[:, 0]
+    ev = np.asarray(e, dtype=np.float64).reshape(-1) - p * u[:, 1]
+    return dv, ev
+
+
+def radial_from_dict(data: dict[str, Any]) -> RadialResidualFix:
+    """The inverse of :meth:`RadialResidualFix.to_dict` (the fix store keeps it as JSON)."""
+    return RadialResidualFix(
+        (float(data["center_px"][0]), float(data["center_px"][1])), float(data["offset_px"]),
+        tuple(float(a) for a in data["coefficients"]), float(data["radius_scale_px"]),
+        float(data["rms_before_px"]), float(data["rms_after_px"]), int(data["n_used"]),
+        int(data["n_total"]),
+    )
+
+
+__all__ = [
+    "MIN_MATCHES",
+    "RADIAL_DEGREE",
+    "correct_matches",
+    "fit_capture_radial",
+    "pool_radial",
+    "radial_from_dict",
+]
