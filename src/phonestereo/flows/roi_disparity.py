@@ -158,6 +158,9 @@ def _window(
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
     opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
     win = Rectification.from_rig(rig, mode, opts)
+    # the tele's maps on the helper thread while this one places the boxes (measure_roi's
+    # tele source is queued behind them there; the wide's maps are built on this thread)
+    background(win.prepare, "tele")
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
     grid = frozen(win.points_wide(grid_raw) + shift)
     c_tele = frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])

@@ -296,6 +296,13 @@ class Rectification:
         (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
         return maps.source(img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias)
 
+    def prepare(self, role: str) -> None:
+        """Build and cache what :meth:`source` needs for an image of ``role`` at its calibrated
+        size (the maps, the raw box they reach): image-independent work that a caller can
+        start on the helper thread before the images are at hand."""
+        raw, rect, _ = self._chain(role)
+        self._source(role, raw.f / rect.f, raw.size)
+
     def _source(
         self, role: str, shrink: float, size: tuple[int, int]
     ) -> tuple[tuple[int, int, int, int], NDArray[np.float32], NDArray[np.float32]]:
