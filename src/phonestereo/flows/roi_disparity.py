@@ -162,21 +162,22 @@ def _window(
     # tele source is queued behind them there; the wide's maps are built on this thread)
     background(win.prepare, "tele")
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
-    grid = frozen(win.points_wide(grid_raw) + shift)
+    # every raw point in one call (each point is undistorted on its own: the same values)
+    raw = (grid_raw, roi_grid(roi, 3), roi_grid(big, 3), roi_grid(wide_box, 3), outline(wide_box))
+    grid_w, box_small, pts, wide_pts, wide_outline = np.split(
+        win.points_wide(np.concatenate(raw)), np.cumsum([len(r) for r in raw])[:-1]
+    )
+    grid = frozen(grid_w + shift)
     c_tele = frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])
-    box_small = frozen(win.points_wide(roi_grid(roi, 3)))
-    pts = win.points_wide(roi_grid(big, 3))
+    box_small = frozen(box_small)
     if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
         why = "the ROI does not map into the rectified view"
         return _Window(win, shift, d_max, grid, box_small, (0, 0, 0, 0), (), c_tele, why)
     box = _bounding_box(pts, win.wide_rect.size)
     # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
     # in the bounding box), else — or when that one is ambiguous — the bounding box.
-    bbox = _bounding_box(win.points_wide(roi_grid(wide_box, 3)), win.wide_rect.size)
-    inner = inscribed_box(
-        win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
-        win.wide_rect.size,
-    )
+    bbox = _bounding_box(wide_pts, win.wide_rect.size)
+    inner = inscribed_box(wide_outline, tele_outline(win), (-2.0, float(d_max)), win.wide_rect.size)
     cboxes = [b for b in (inner, bbox) if b is not None]
     if inner == bbox:
         cboxes = [bbox]
