@@ -30,7 +30,7 @@ from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
-from phonestereo.flows.roi_window import coarse_window, fine_window
+from phonestereo.flows.roi_window import coarse_window, fine_part, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array, frozen
@@ -307,7 +307,9 @@ def measure_roi(
     slo, shi = g.box_small.min(0), g.box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
-        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0)
+        # the blur only where the matcher reads (the fine part), when there is one
+        part = fine_part(box, d0, e0, cfg, (lw.shape[1], lw.shape[0])) if two_pass else None
+        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0, part=part)
         if s_l > 0 or s_r > 0:
             variants.insert(0, (bl, br, s_l - s_r))
     found: tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]] | None = None

@@ -20,7 +20,14 @@ from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
-__all__ = ["COARSE_INTERPOLATION", "MAX_FINE_SHARE", "coarse_window", "fine_window", "remap_pair"]
+__all__ = [
+    "COARSE_INTERPOLATION",
+    "MAX_FINE_SHARE",
+    "coarse_window",
+    "fine_part",
+    "fine_window",
+    "remap_pair",
+]
 
 
 #: The coarse step's window resampling: it locates whole-pixel peaks and compares tiles.
@@ -61,6 +68,16 @@ def _fine_part(
     return x0, max(y - reach, 0), x1, min(y + h + reach, H)
 
 
+def fine_part(
+    box: tuple[int, int, int, int], d0: float, e0: float, cfg: RoiConfig, size: tuple[int, int]
+) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of the window :func:`fine_window` resamples again for the coarse
+    disparity ``d0`` and row offset ``e0``: what the fine matcher reads, plus a guard."""
+    lo_d = int(np.floor(d0)) - cfg.fine_range_px
+    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
+    return _fine_part(box, lo_d, hi_d, e0, cfg, size)
+
+
 def coarse_window(
     sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig
 ) -> tuple[Any, Any, bool]:
@@ -87,10 +104,8 @@ def fine_window(
     uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
     then the one a whole-window Lanczos-4 remap gives.
     """
-    lo_d = int(np.floor(d0)) - cfg.fine_range_px
-    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
     H, W = lw.shape[:2]
-    x0, y0, x1, y1 = part_w = part_t = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
+    x0, y0, x1, y1 = part_w = part_t = fine_part(box, d0, e0, cfg, (W, H))
     if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
         c = np.array(center)
         q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
