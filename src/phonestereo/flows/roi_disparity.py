@@ -307,8 +307,8 @@ def measure_roi(
     slo, shi = g.box_small.min(0), g.box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
-        # the blur only where the matcher reads (the fine part), when there is one
-        part = fine_part(box, d0, e0, cfg, (lw.shape[1], lw.shape[0])) if two_pass else None
+        # the blur only where the matcher reads (the fine part)
+        part = fine_part(box, d0, e0, cfg, (lw.shape[1], lw.shape[0]))
         bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0, part=part)
         if s_l > 0 or s_r > 0:
             variants.insert(0, (bl, br, s_l - s_r))
