@@ -136,18 +136,17 @@ def _tile_scores(
     r = search_px
     H, W = right.shape[:2]
     out = np.full((5, n * n), np.nan)
+    dtype = np.uint8 if left.dtype == right.dtype == np.uint8 else np.float32  # as coarse_search
 
     def tiles(idx: Sequence[int]) -> None:  # half of them on the helper thread (OpenCV)
         for i in idx:
             tx, ty = x + (i % n) * tw, y + (i // n) * th
             sx, sy = round(tx - d) - r, round(ty - e) - r
-            tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
+            tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=dtype)
             if (sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H
                     or tpl.std() < 1e-3):
                 continue
-            win = np.ascontiguousarray(
-                right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32
-            )
+            win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], dtype)
             z, fx, fy = template_peak(win, tpl)
             out[:, i] = (z, tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
 
