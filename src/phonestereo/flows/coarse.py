@@ -144,7 +144,7 @@ def _tile_scores(
             sx, sy = round(tx - d) - r, round(ty - e) - r
             tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=dtype)
             if (sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H
-                    or tpl.std() < 1e-3):
+                    or cv2.meanStdDev(tpl)[1][0, 0] < 1e-3):
                 continue
             win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], dtype)
             z, fx, fy = template_peak(win, tpl)
