@@ -135,13 +135,18 @@ def fine_window(
         q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
         lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
         part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
-    fine_w, fine_t = remap_pair(sources, DEFAULT_INTERPOLATION, (part_w, part_t))
+
+    def tele() -> Any:  # the tele's part, pre-scaled and pasted, on the helper thread
+        fine_t = sources[1].remap(DEFAULT_INTERPOLATION, part_t)
+        if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
+            src = rt.copy()
+            src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
+            fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
+        out = rt.copy()
+        out[y0:y1, x0:x1] = fine_t
+        return out
+
+    pending = background(tele)
     lw = lw.copy()
-    lw[y0:y1, x0:x1] = fine_w
-    if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
-        src = rt.copy()
-        src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
-        fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
-    rt = rt.copy()
-    rt[y0:y1, x0:x1] = fine_t
-    return lw, rt
+    lw[y0:y1, x0:x1] = sources[0].remap(DEFAULT_INTERPOLATION, part_w)
+    return lw, pending.result()
