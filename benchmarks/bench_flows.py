@@ -64,19 +64,21 @@ from phonestereo.learning.pair_guide import WideToTeleGuide
 from phonestereo.rectification import Rectification, RectifyOptions
 
 #: Blocks of the application phase reported from the profile: label → function name (file
-#: suffix, function) as pstats keys them.
+#: suffix, function; "a|b": the sum of both) as pstats keys them (the calling thread only: the
+#: helper thread's share shows as waits inside the blocks that hand it work).
 BLOCKS = (
     ("application.run (total)", "flows/application.py", "run"),
     ("measure_roi", "flows/roi_disparity.py", "measure_roi"),
     ("  window Rectification.from_rig", "rectification/rectify.py", "from_rig"),
-    ("  window sources (maps + antialias blur)", "rectification/rectify.py", "sources"),
+    ("  window sources (maps + antialias blur)", "rectification/rectify.py", "source|sources"),
     ("    build_map (rectification maps)", "rectification/maps.py", "build_map"),
-    ("  window remaps (coarse cubic, fine Lanczos-4)", "flows/roi_window.py", "remap_pair"),
+    ("  window remaps (coarse cubic, fine Lanczos-4)", "flows/roi_window.py",
+     "coarse_window|fine_window"),
     ("  coarse_peak (search, tiles, gate)", "flows/coarse_gate.py", "coarse_peak"),
     ("  equalise_blur", "flows/blur_equalise.py", "equalise_blur"),
     ("  match_rectified", "features/matching.py", "match_rectified"),
     ("  fit_wt_scale", "fixes/wt_scale.py", "fit_wt_scale"),
-    ("  fit_plane", "flows/roi_disparity.py", "fit_plane"),
+    ("  fit_plane", "flows/roi_plane.py", "fit_plane"),
     ("  refine_lk", "features/subpixel.py", "refine_lk"),
     ("reference_rectification", "flows/roi_disparity.py", "reference_rectification"),
     ("Corrector.correct", "flows/config.py", "correct"),
@@ -252,8 +254,10 @@ def _blocks(
     raw: dict[Any, Any] = stats.stats  # type: ignore[attr-defined]
     out = []
     for label, suffix, fn in blocks:
+        names = fn.split("|")
         cum = sum(
-            v[3] for (file, _line, name), v in raw.items() if name == fn and file.endswith(suffix)
+            v[3] for (file, _line, name), v in raw.items()
+            if name in names and file.endswith(suffix)
         )
         out.append({"block": label, "ms_per_capture": round(1000 * cum / n_calls, 2)})
     return out

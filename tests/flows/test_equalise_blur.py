@@ -65,3 +65,18 @@ def test_a_large_box_is_thinned_evenly_and_chooses_the_same_blur() -> None:
     big = (30, 20, 600, 440)
     _, _, s_l, _ = equalise_blur(left, right, big, 20.4, 0)
     assert 1.0 <= s_l <= 1.4
+
+
+@pytest.mark.parametrize("part", [(150, 100, 420, 300), (0, 0, 300, 480), (200, 50, 640, 470)])
+def test_the_blur_of_a_part_is_the_whole_images_there(part: tuple[int, int, int, int]) -> None:
+    # measure_roi blurs only the part its matcher reads (issue #18): every pixel there must be
+    # the whole image's blur (exactly: the fine disparities must not change), the rest untouched
+    left, right = _pair(1.4, 0.982, 20.4, 0.0)
+    whole, _, s_l, _ = equalise_blur(left, right, (170, 120, 300, 240), 20.4, 0)
+    blurred, _, s_part, _ = equalise_blur(left, right, (170, 120, 300, 240), 20.4, 0, part=part)
+    assert s_l == s_part > 0
+    x0, y0, x1, y1 = part
+    assert np.array_equal(blurred[y0:y1, x0:x1], whole[y0:y1, x0:x1])
+    outside = np.ones(left.shape, bool)
+    outside[y0:y1, x0:x1] = False
+    assert np.array_equal(blurred[outside], left[outside])

@@ -69,3 +69,22 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
     outside[y0:y1, x0:x1] = False
     assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)
     assert np.array_equal(ft[outside], rt_coarse[outside])
+
+
+def test_the_coarse_left_is_resampled_where_the_coarse_step_reads_only() -> None:
+    # measure_roi hands coarse_window the coarse boxes: the left is resampled inside their
+    # bounding box only (the coarse step reads nothing else; the fine part is resampled again),
+    # the right in two row bands, one per thread; every pixel read is the whole remap's
+    rect, w, t = _setup()
+    W, H = rect.wide_rect.size
+    sources = rect.sources(w, t)
+    box = (W // 3, H // 3, W // 3, H // 3)
+    boxes = ((W // 4, H // 4, W // 2, H // 2), box)
+    lw, rt, two_pass = coarse_window(sources, box, 40, RoiConfig(), boxes)
+    whole_l, whole_r, _ = coarse_window(sources, box, 40, RoiConfig())
+    assert two_pass and lw.shape == whole_l.shape
+    sl = np.s_[H // 4 : H // 4 + H // 2, W // 4 : W // 4 + W // 2]
+    assert np.array_equal(lw[sl], whole_l[sl]) and np.array_equal(rt, whole_r)
+    outside = np.ones((H, W), bool)
+    outside[sl] = False
+    assert not lw[outside].any()

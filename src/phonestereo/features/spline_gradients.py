@@ -64,7 +64,7 @@ def image_gradients(img: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32, F32]:
 
 def window_gradients(img: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32, F32]:
     """:func:`image_gradients` window by window (each row and column gathered, then the
-    derivative FIR as one matrix product)."""
+    derivative FIR as a matrix product per window)."""
     t, m, n = _TAPS + 1, 2 * r + 1, len(x0)
     h, w = img.shape
     u, v = np.arange(-r, r + 1), np.arange(-r - t, r + t + 1)
@@ -77,9 +77,10 @@ def window_gradients(img: F32, x0: I64, y0: I64, r: int) -> tuple[F32, F32, F32]
     ys, xs = mirror(y0[:, None] + v, h), mirror(x0[:, None] + v, w)
     px = img[(y0[:, None] + u)[:, :, None], xs[:, None, :]]  # (n, M, M + 2t)
     py = img[ys[:, None, :], (x0[:, None] + u)[:, :, None]]  # (n, M cols, M + 2t rows)
-    gx = px.reshape(n * m, -1).astype(np.float32) @ mat
-    gy = py.reshape(n * m, -1).astype(np.float32) @ mat
-    gy = gy.reshape(n, m, m).transpose(0, 2, 1).reshape(n, m * m)
+    # one small product per window: a single (n·M, M + 2t) product is big enough for
+    # OpenBLAS to wake its second thread, which then spins for milliseconds after the call
+    gx = px.astype(np.float32) @ mat
+    gy = (py.astype(np.float32) @ mat).transpose(0, 2, 1).reshape(n, m * m)
     return np.ascontiguousarray(px[:, :, t : t + m].reshape(n, m * m)), gx.reshape(n, m * m), gy
 
 

@@ -31,6 +31,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
@@ -83,9 +84,9 @@ def _block(coef: F32, iy: I64, c0: I64, rows: int, cols: int) -> tuple[F32, NDAr
     """Blocks coef[iy + i, c0 + j] (n, rows, cols), moved inside; ok = fully inside the image."""
     h, w = coef.shape
     ok = (iy >= 0) & (iy + rows <= h) & (c0 >= 0) & (c0 + cols <= w)
-    start = np.clip(iy, 0, h - rows) * w + np.clip(c0, 0, w - cols)
-    offs = np.arange(rows)[:, None] * w + np.arange(cols)[None, :]
-    return np.take(coef.ravel(), start[:, None, None] + offs[None]), ok
+    # blocks of a strided view: no (n, rows, cols) index array to build and read
+    blocks = sliding_window_view(coef, (rows, cols))
+    return blocks[np.clip(iy, 0, h - rows), np.clip(c0, 0, w - cols)], ok
 
 
 def sample_windows(

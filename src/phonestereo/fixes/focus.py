@@ -25,6 +25,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from phonestereo.errors import InputError, ShapeError
+from phonestereo.features.crlb import solve_spd
 from phonestereo.geometry.checks import Array, as_points
 
 #: Fewest point pairs for a scale + offset fit (3 unknowns, some redundancy).
@@ -59,11 +60,12 @@ def _robust_linear(A: Array, b: Array, f_scale: float) -> tuple[Array, Array, fl
     inl = np.abs(r) <= 3.0 * max(f_scale, 1.4826 * float(np.median(np.abs(r))))
     dof = max(int(inl.sum()) - A.shape[1], 1)
     s2 = float(np.sum(r[inl] ** 2)) / dof
-    try:
-        cov = np.linalg.inv(A[inl].T @ A[inl]) * s2
-        sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    except np.linalg.LinAlgError:
-        sig = np.full(A.shape[1], np.inf)
+    # (AᵀA)⁻¹ by the vectorised Cholesky: LAPACK's inverse wakes OpenBLAS's second thread,
+    # which then spins for milliseconds after this 2 × 2 or 3 × 3 call
+    p = A.shape[1]
+    ata = A[inl].T @ A[inl]
+    inv, spd = solve_spd(ata[None], np.eye(p)[None])
+    sig = np.sqrt(np.clip(np.diag(inv[0]) * s2, 0.0, None)) if spd[0] else np.full(p, np.inf)
     rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float("nan")
     return np.asarray(res.x), sig, rms, r
 

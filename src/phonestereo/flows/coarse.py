@@ -59,11 +59,14 @@ def coarse_search(
     lobe the range cuts (an alias lobe whose top lies just outside is still a competitor).
     """
     x, y, w, h = box
-    tpl = np.ascontiguousarray(left[y : y + h, x : x + w], dtype=np.float32)
+    # 8-bit windows stay 8-bit: OpenCV then correlates in float32 (≤ 1e-4 off the float64
+    # correlation of float32 input; ~1.5× faster for a 12 MP box)
+    dtype = np.uint8 if left.dtype == right.dtype == np.uint8 else np.float32
+    tpl = np.ascontiguousarray(left[y : y + h, x : x + w], dtype=dtype)
     H, W = right.shape[:2]
     xs0, xs1 = max(0, x - d_max), min(W, x + w - d_min)
     ys0, ys1 = max(0, y - rows), min(H, y + h + rows)
-    strip = np.ascontiguousarray(right[ys0:ys1, xs0:xs1], dtype=np.float32)
+    strip = np.ascontiguousarray(right[ys0:ys1, xs0:xs1], dtype=dtype)
     if strip.shape[0] < h or strip.shape[1] < w or float(tpl.std()) < 1e-3:
         return _NO_PEAK
     score = cv2.matchTemplate(strip, tpl, cv2.TM_CCOEFF_NORMED)
@@ -133,18 +136,17 @@ def _tile_scores(
     r = search_px
     H, W = right.shape[:2]
     out = np.full((5, n * n), np.nan)
+    dtype = np.uint8 if left.dtype == right.dtype == np.uint8 else np.float32  # as coarse_search
 
     def tiles(idx: Sequence[int]) -> None:  # half of them on the helper thread (OpenCV)
         for i in idx:
             tx, ty = x + (i % n) * tw, y + (i // n) * th
             sx, sy = round(tx - d) - r, round(ty - e) - r
-            tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=np.float32)
+            tpl = np.ascontiguousarray(left[ty : ty + th, tx : tx + tw], dtype=dtype)
             if (sx < 0 or sy < 0 or sx + tw + 2 * r > W or sy + th + 2 * r > H
-                    or tpl.std() < 1e-3):
+                    or cv2.meanStdDev(tpl)[1][0, 0] < 1e-3):
                 continue
-            win = np.ascontiguousarray(
-                right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], np.float32
-            )
+            win = np.ascontiguousarray(right[sy : sy + th + 2 * r, sx : sx + tw + 2 * r], dtype)
             z, fx, fy = template_peak(win, tpl)
             out[:, i] = (z, tx - (sx + fx), ty - (sy + fy), tx + tw / 2, ty + th / 2)
 

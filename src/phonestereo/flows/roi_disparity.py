@@ -32,7 +32,7 @@ from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
-from phonestereo.flows.roi_window import coarse_window, fine_window
+from phonestereo.flows.roi_window import coarse_window, fine_part, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array, frozen
@@ -160,22 +160,26 @@ def _window(
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
     opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
     win = Rectification.from_rig(rig, mode, opts)
+    # the tele's maps on the helper thread while this one places the boxes (measure_roi's
+    # tele source is queued behind them there; the wide's maps are built on this thread)
+    background(win.prepare, "tele")
     shift = np.array([ref.wide_rect.cx - win.wide_rect.cx, ref.wide_rect.cy - win.wide_rect.cy])
-    grid = frozen(win.points_wide(grid_raw) + shift)
+    # every raw point in one call (each point is undistorted on its own: the same values)
+    raw = (grid_raw, roi_grid(roi, 3), roi_grid(big, 3), roi_grid(wide_box, 3), outline(wide_box))
+    grid_w, box_small, pts, wide_pts, wide_outline = np.split(
+        win.points_wide(np.concatenate(raw)), np.cumsum([len(r) for r in raw])[:-1]
+    )
+    grid = frozen(grid_w + shift)
     c_tele = frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])
-    box_small = frozen(win.points_wide(roi_grid(roi, 3)))
-    pts = win.points_wide(roi_grid(big, 3))
+    box_small = frozen(box_small)
     if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
         why = "the ROI does not map into the rectified view"
         return _Window(win, shift, d_max, grid, box_small, (0, 0, 0, 0), (), c_tele, why)
     box = _bounding_box(pts, win.wide_rect.size)
     # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
     # in the bounding box), else — or when that one is ambiguous — the bounding box.
-    bbox = _bounding_box(win.points_wide(roi_grid(wide_box, 3)), win.wide_rect.size)
-    inner = inscribed_box(
-        win.points_wide(outline(wide_box)), tele_outline(win), (-2.0, float(d_max)),
-        win.wide_rect.size,
-    )
+    bbox = _bounding_box(wide_pts, win.wide_rect.size)
+    inner = inscribed_box(wide_outline, tele_outline(win), (-2.0, float(d_max)), win.wide_rect.size)
     cboxes = [b for b in (inner, bbox) if b is not None]
     if inner == bbox:
         cboxes = [bbox]
@@ -289,7 +293,7 @@ def measure_roi(
     source_wide = win.source("wide", image_wide)
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
     sources = (source_wide, pending.result())
-    lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
+    lw, rt, two_pass = coarse_window(sources, box, d_max, cfg, cboxes)
     ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
@@ -309,7 +313,9 @@ def measure_roi(
     slo, shi = g.box_small.min(0), g.box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
-        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0)
+        # the blur only where the matcher reads (the fine part)
+        part = fine_part(box, d0, e0, cfg, (lw.shape[1], lw.shape[0]))
+        bl, br, s_l, s_r = equalise_blur(lw, rt, box, d0, e0, part=part)
         if s_l > 0 or s_r > 0:
             variants.insert(0, (bl, br, s_l - s_r))
     found: tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]] | None = None

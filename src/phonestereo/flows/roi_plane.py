@@ -94,7 +94,8 @@ def fit_plane(xy: F64, d: F64, sigma: F64, curved: bool | None = None) -> PlaneF
     w = 1.0 / np.clip(sigma, 1e-3, None)
     Aw, bw = A * w[:, None], d * w
     p0 = np.linalg.lstsq(Aw, bw, rcond=None)[0]
-    res = least_squares(lambda p: Aw @ p - bw, p0, loss="soft_l1", f_scale=2.0)
+    # the residual is linear: its Jacobian is Aw (not SciPy's finite differences)
+    res = least_squares(lambda p: Aw @ p - bw, p0, jac=lambda p: Aw, loss="soft_l1", f_scale=2.0)
     r = d - A @ res.x
     rw = r * w
     inl = np.abs(rw) <= 4.0 * max(1.0, 1.4826 * float(np.median(np.abs(rw))))

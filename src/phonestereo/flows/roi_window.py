@@ -20,7 +20,14 @@ from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
-__all__ = ["COARSE_INTERPOLATION", "MAX_FINE_SHARE", "coarse_window", "fine_window", "remap_pair"]
+__all__ = [
+    "COARSE_INTERPOLATION",
+    "MAX_FINE_SHARE",
+    "coarse_window",
+    "fine_part",
+    "fine_window",
+    "remap_pair",
+]
 
 
 #: The coarse step's window resampling: it locates whole-pixel peaks and compares tiles.
@@ -61,18 +68,52 @@ def _fine_part(
     return x0, max(y - reach, 0), x1, min(y + h + reach, H)
 
 
+def fine_part(
+    box: tuple[int, int, int, int], d0: float, e0: float, cfg: RoiConfig, size: tuple[int, int]
+) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of the window :func:`fine_window` resamples again for the coarse
+    disparity ``d0`` and row offset ``e0``: what the fine matcher reads, plus a guard."""
+    lo_d = int(np.floor(d0)) - cfg.fine_range_px
+    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
+    return _fine_part(box, lo_d, hi_d, e0, cfg, size)
+
+
 def coarse_window(
-    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig
+    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
+    left_boxes: tuple[tuple[int, int, int, int], ...] = (),
 ) -> tuple[Any, Any, bool]:
     """The window pair the coarse step reads, and whether the fine part must be resampled
     again (:func:`fine_window`): cubic when the fine part (bounded by the whole searched
-    range −2 … d_max and the coarse rows) is a small share of the window, else Lanczos-4."""
+    range −2 … d_max and the coarse rows) is a small share of the window, else Lanczos-4.
+
+    ``left_boxes`` (x, y, w, h): the only part of the left window the coarse step reads (its
+    boxes); with two passes the left is then resampled there only (zeros elsewhere)."""
     H, W = sources[0].map_x.shape
     x0, y0, x1, y1 = _fine_part(box, -2 - cfg.fine_range_px, d_max + cfg.fine_range_px,
                                 cfg.coarse_rows, cfg, (W, H))
     if (x1 - x0) * (y1 - y0) > MAX_FINE_SHARE * W * H:
         return (*remap_pair(sources, DEFAULT_INTERPOLATION), False)
-    return (*remap_pair(sources, COARSE_INTERPOLATION), True)
+    if not left_boxes:
+        return (*remap_pair(sources, COARSE_INTERPOLATION), True)
+    return (*_coarse_pair(sources, left_boxes), True)
+
+
+def _coarse_pair(
+    sources: tuple[Source, Source], left_boxes: tuple[tuple[int, int, int, int], ...]
+) -> tuple[Any, Any]:
+    """The cubic pair with the left resampled only over its boxes' bounding box, the right
+    whole: its first k rows on the helper thread, the rest here after the left's part (each
+    thread resamples about as many pixels; every pixel is the whole-window remap's)."""
+    H, W = sources[0].map_x.shape
+    x0, y0 = min(b[0] for b in left_boxes), min(b[1] for b in left_boxes)
+    x1, y1 = max(b[0] + b[2] for b in left_boxes), max(b[1] + b[3] for b in left_boxes)
+    k = min(round((H + (x1 - x0) * (y1 - y0) / W) / 2), H - 1)
+    top = background(sources[1].remap, COARSE_INTERPOLATION, (0, 0, W, k))
+    part = sources[0].remap(COARSE_INTERPOLATION, (x0, y0, x1, y1))
+    left = np.zeros((H, W, *part.shape[2:]), part.dtype)
+    left[y0:y1, x0:x1] = part
+    bottom = sources[1].remap(COARSE_INTERPOLATION, (0, k, W, H))
+    return left, np.concatenate([top.result(), bottom])
 
 
 def fine_window(
@@ -87,22 +128,25 @@ def fine_window(
     uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
     then the one a whole-window Lanczos-4 remap gives.
     """
-    lo_d = int(np.floor(d0)) - cfg.fine_range_px
-    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
     H, W = lw.shape[:2]
-    x0, y0, x1, y1 = part_w = part_t = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
+    x0, y0, x1, y1 = part_w = part_t = fine_part(box, d0, e0, cfg, (W, H))
     if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
         c = np.array(center)
         q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
         lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
         part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
-    fine_w, fine_t = remap_pair(sources, DEFAULT_INTERPOLATION, (part_w, part_t))
+
+    def tele() -> Any:  # the tele's part, pre-scaled and pasted, on the helper thread
+        fine_t = sources[1].remap(DEFAULT_INTERPOLATION, part_t)
+        if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
+            src = rt.copy()
+            src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
+            fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
+        out = rt.copy()
+        out[y0:y1, x0:x1] = fine_t
+        return out
+
+    pending = background(tele)
     lw = lw.copy()
-    lw[y0:y1, x0:x1] = fine_w
-    if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
-        src = rt.copy()
-        src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
-        fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
-    rt = rt.copy()
-    rt[y0:y1, x0:x1] = fine_t
-    return lw, rt
+    lw[y0:y1, x0:x1] = sources[0].remap(DEFAULT_INTERPOLATION, part_w)
+    return lw, pending.result()

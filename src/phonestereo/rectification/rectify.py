@@ -296,6 +296,13 @@ class Rectification:
         (x0, y0, x1, y1), mx, my = self._source(role, shrink, (img.shape[1], img.shape[0]))
         return maps.source(img[y0:y1, x0:x1], mx, my, shrink, self.options.antialias)
 
+    def prepare(self, role: str) -> None:
+        """Build and cache what :meth:`source` needs for an image of ``role`` at its calibrated
+        size (the maps, the raw box they reach): image-independent work that a caller can
+        start on the helper thread before the images are at hand."""
+        raw, rect, _ = self._chain(role)
+        self._source(role, raw.f / rect.f, raw.size)
+
     def _source(
         self, role: str, shrink: float, size: tuple[int, int]
     ) -> tuple[tuple[int, int, int, int], NDArray[np.float32], NDArray[np.float32]]:
@@ -314,9 +321,11 @@ class Rectification:
             box = (0, 0, w, h)
             # OpenCV's Gaussian kernel reaches ≤ 4σ + 1 px; Lanczos-4 taps ≤ 4 px.
             m = int(np.ceil(4 * maps.antialias_sigma(shrink))) + 1 + 4 + 1
+            n_valid = mx.size
             if key[1] and not _corners_span(mx, my, m, size):
                 ok = cv2.compare(mx, float(maps.INVALID), cv2.CMP_NE)  # uint8 mask
-                if cv2.countNonZero(ok):
+                n_valid = cv2.countNonZero(ok)
+                if n_valid:
                     (x_lo, x_hi, *_), (y_lo, y_hi, *_) = (cv2.minMaxLoc(a, ok) for a in (mx, my))
                     lo = np.floor([x_lo, y_lo]).astype(int) - m
                     hi = np.ceil([x_hi, y_hi]).astype(int) + m + 1
@@ -324,7 +333,9 @@ class Rectification:
                            min(int(hi[0]), w), min(int(hi[1]), h))
             if box[2] <= box[0] or box[3] <= box[1]:
                 box = (0, 0, w, h)
-            if box[:2] != (0, 0):
+            if box[:2] != (0, 0) and n_valid == mx.size:  # no invalid pixel to keep
+                mx, my = mx - np.float32(box[0]), my - np.float32(box[1])
+            elif box[:2] != (0, 0):
                 mx = np.where(mx == np.float32(maps.INVALID), mx, mx - np.float32(box[0]))
                 my = np.where(my == np.float32(maps.INVALID), my, my - np.float32(box[1]))
             self._cache[key] = (box, mx, my)  # type: ignore[assignment]

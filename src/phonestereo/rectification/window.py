@@ -87,16 +87,20 @@ def place_window(
     """
     wide, R_wide = cameras["wide"]
     tele, R_tele = cameras["tele"]
-    clip = _bbox(to_rectified(wide, template, R_wide, border_pixels(0, 0, *wide.size)), "wide")
+    border = border_pixels(0, 0, *wide.size)
     if options.roi is not None:
         check_roi(options.roi, wide)
-        pts = to_rectified(wide, template, R_wide, border_pixels(*options.roi))
-        box = _bbox(pts, "ROI")
-    elif options.fov == "wide":
-        box = clip
+        # the wide's border and the ROI's in one call (each point is mapped on its own)
+        roi_border = border_pixels(*options.roi)
+        pts = to_rectified(wide, template, R_wide, np.concatenate([border, roi_border]))
+        clip, box = _bbox(pts[: len(border)], "wide"), _bbox(pts[len(border) :], "ROI")
     else:
-        pts = to_rectified(tele, template, R_tele, border_pixels(0, 0, *tele.size))
-        box = _bbox(pts, "tele image")
+        clip = _bbox(to_rectified(wide, template, R_wide, border), "wide")
+        if options.fov == "wide":
+            box = clip
+        else:
+            pts = to_rectified(tele, template, R_tele, border_pixels(0, 0, *tele.size))
+            box = _bbox(pts, "tele image")
     lo = (max(box[0], clip[0]), max(box[1], clip[1]))
     hi = (min(box[2], clip[2]), min(box[3], clip[3]))
     if lo[0] >= hi[0] or lo[1] >= hi[1]:
