@@ -49,6 +49,15 @@ def learn(
     ipd_mm: Annotated[
         float, typer.Option("--ipd-mm", help="IPD of the face chart's faces, millimetres.")
     ] = 63.0,
+    face_pitch_mm: Annotated[
+        float,
+        typer.Option(
+            "--face-pitch-mm",
+            help="Grid pitch of the face chart's eye midpoints (the printed chart's cell, "
+            "`phonestereo chart faces`: 325 mm); it scales the chart's plane. 0: the IPDs alone "
+            "(a chart of another layout).",
+        ),
+    ] = 325.0,
     population: Annotated[
         bool,
         typer.Option(
@@ -87,7 +96,7 @@ def learn(
     console = Console(stderr=True, soft_wrap=True)
     try:
         cfg = load_flow_config(config)
-        mode = IpdMode.population() if population else IpdMode.chart(ipd_mm)
+        mode = IpdMode.population() if population else IpdMode.chart(ipd_mm, face_pitch_mm)
         cs = load_capture_set(capture_set)
         cal = load_calibration(calibration)
         with (

@@ -88,13 +88,14 @@ class FlowConfig:
     #: calibration and use (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the
     #: calibration gives the wide's physical focal length and its focus distance, else a no-op).
     wide_breathing: bool = True
-    #: A fix, off by default: the residual radial distortion of the rectified pair (thesis §3.2's
-    #: non-disparity-axis fix, :mod:`~phonestereo.fixes.radial_residual`), fitted to each face
-    #: capture's whole-view matches and taken out of the faces' and, pooled, the ROI's
-    #: disparities. Off because alone it uncovers the IPD ruler's own bias: on the random modules
-    #: it cuts the worst sets' error (random-1006 1.14 → 0.34 %) but raises the good ones'
-    #: (random-1015 0.37 → 0.79 %; docs/module-random.md, session 11).
-    radial_residual: bool = False
+    #: A fix (on by default, see ``heating_gate``): the residual radial distortion of the rectified
+    #: pair (thesis §3.2's non-disparity-axis fix, :mod:`~phonestereo.fixes.radial_residual`),
+    #: fitted to each face capture's whole-view matches and taken out of the faces' and, pooled,
+    #: the ROI's disparities. On because a factory's even-order lens model leaves it on every odd
+    #: lens; together with the face chart's grid as the ruler (``IpdMode.chart``) the 20 random
+    #: modules' medians fall by 30 % (p90 ≤ 2.5 % on 20 of 20). Alone, with the IPD ruler, it
+    #: uncovers that ruler's bias (random-1015 0.37 → 0.79 %; docs/module-random.md, session 11).
+    radial_residual: bool = True
     #: Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele shares
     #: with the wide (not the faces' box): the scale's lever is the view's height.
     face_wt_keypoints: int = 1500

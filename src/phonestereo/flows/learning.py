@@ -39,6 +39,7 @@ from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
 from phonestereo.geometry import Rig
 from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
 from phonestereo.io.fingerprint import capture_set_fingerprint
+from phonestereo.learning.chart_pitch import CHART_PITCH_M
 from phonestereo.learning.ipd import IpdPrior
 from phonestereo.learning.learn import learn_capture
 from phonestereo.learning.observation import Observation
@@ -58,21 +59,31 @@ class IpdMode:
     kind: Literal["chart", "population"]
     #: The IPD used, metres.
     ipd_m: float
+    #: A chart's eye-midpoint grid pitch, metres (:mod:`~phonestereo.learning.chart_pitch`);
+    #: None: the IPDs alone scale its plane.
+    pitch_m: float | None = None
 
     @classmethod
-    def chart(cls, ipd_mm: float = 63.0) -> IpdMode:
-        """A face chart printed with ``ipd_mm`` (an adult IPD, 30–100 mm).
+    def chart(cls, ipd_mm: float = 63.0, pitch_mm: float = 1000 * CHART_PITCH_M) -> IpdMode:
+        """A face chart printed with ``ipd_mm`` (an adult IPD, 30–100 mm) and its faces' eye
+        midpoints on a grid of ``pitch_mm`` (the shipped chart's 325 mm; 0: not used).
 
         Raises
         ------
         InputError
-            An IPD outside 30–100 mm.
+            An IPD outside 30–100 mm, or a pitch that is neither 0 nor longer than 2 IPDs.
         """
         if not 30.0 < float(ipd_mm) < 100.0:
             raise InputError(
                 f"--ipd-mm must be an adult IPD in millimetres (30–100), got {ipd_mm}"
             )
-        return cls("chart", float(ipd_mm) / 1000.0)
+        if not (float(pitch_mm) == 0.0 or 2 * float(ipd_mm) < float(pitch_mm) < 5000.0):
+            raise InputError(
+                f"--face-pitch-mm must be 0 (off) or the chart's cell in millimetres (longer "
+                f"than two IPDs, < 5000), got {pitch_mm}"
+            )
+        pitch = float(pitch_mm) / 1000.0 if float(pitch_mm) > 0 else None
+        return cls("chart", float(ipd_mm) / 1000.0, pitch)
 
     @classmethod
     def population(cls, prior: IpdPrior | None = None) -> IpdMode:
@@ -86,7 +97,8 @@ class IpdMode:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
-        return {"kind": self.kind, "ipd_mm": round(1000 * self.ipd_m, 4)}
+        pitch = None if self.pitch_m is None else round(1000 * self.pitch_m, 4)
+        return {"kind": self.kind, "ipd_mm": round(1000 * self.ipd_m, 4), "pitch_mm": pitch}
 
 
 def store_context(config: FlowConfig, rig: Rig) -> StoreContext:
@@ -194,6 +206,7 @@ def learn_face_capture(
         ipd_m=mode.ipd_m,
         source=mode.source,
         depth_mode="chart" if mode.kind == "chart" else "face",
+        chart_pitch_m=mode.pitch_m,
         backend=backend,
         images=imgs,
     )

@@ -21,6 +21,7 @@ from scipy.optimize import linear_sum_assignment
 
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks.base import FaceResult
+from phonestereo.learning.chart_pitch import grid_scale
 from phonestereo.learning.ipd import IPD_M, face_depth, fit_face_plane
 from phonestereo.rectification import Rectification
 
@@ -34,7 +35,11 @@ def pupils_px(res: FaceResult) -> F64:
 
 
 def ipd_depths(
-    faces: FaceResult, rect: Rectification, ipd_m: float = IPD_M, mode: DepthMode = "chart"
+    faces: FaceResult,
+    rect: Rectification,
+    ipd_m: float = IPD_M,
+    mode: DepthMode = "chart",
+    pitch_m: float | None = None,
 ) -> tuple[F64, F64]:
     """IPD depth of each wide face along the rectified axis and its expected disparity.
 
@@ -50,6 +55,10 @@ def ipd_depths(
         ``"chart"``: all faces on one printed plane (:func:`fit_face_plane`, the chart's tilt
         instead of the portraits' head yaw); ``"face"``: real heads, each with its own yaw
         (:func:`face_depth`).
+    pitch_m : float, optional
+        ``"chart"`` only: the chart's grid pitch; the plane's scale is then taken from the eye
+        midpoints' grid (:func:`~phonestereo.learning.chart_pitch.grid_scale`), the IPDs give
+        its tilt. None: the IPDs alone.
 
     Returns
     -------
@@ -68,6 +77,8 @@ def ipd_depths(
             fit = None
         if fit is not None and not fit.reason:
             z = np.asarray(fit.depth_m, dtype=np.float64)
+            if pitch_m is not None:
+                z = z * grid_scale(z, pupils, cam, pitch_m)[0]
     elif mode != "face":
         raise InputError(f"depth mode must be 'chart' or 'face', got {mode!r}")
     bad = ~np.isfinite(z)

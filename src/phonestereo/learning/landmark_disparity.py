@@ -237,6 +237,7 @@ def landmark_disparity(
     *,
     ipd_m: float = IPD_M,
     depth_mode: DepthMode = "chart",
+    chart_pitch_m: float | None = None,
     max_e_px: float = 10.0,
     d_tol_px: float = 4.0,
     d_tol_rel: float = 0.35,
@@ -256,6 +257,8 @@ def landmark_disparity(
         True IPD, metres (63 mm for the face chart; a population mean for real faces).
     depth_mode : {"chart", "face"}
         See :func:`ipd_depths`.
+    chart_pitch_m : float, optional
+        The face chart's grid pitch (``"chart"``), see :func:`ipd_depths`.
     max_e_px, d_tol_px, d_tol_rel : float
         Matching gates, see :func:`match_faces`.
     min_zncc : float
@@ -272,7 +275,7 @@ def landmark_disparity(
     pt = rect.points_tele(pupils_px(faces_tele)).reshape(-1, 2, 2)  # (Nt, 2, 2)
     diff = pw[:, None] - pt[None]  # (Nw, Nt, 2 pupils, 2)
     d_lm, e_lm = diff[..., 0].mean(axis=2), diff[..., 1].mean(axis=2)
-    z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode)
+    z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode, chart_pitch_m)
     pairs = match_faces(
         d_lm, e_lm, d_exp, max_e_px=max_e_px, d_tol_px=d_tol_px, d_tol_rel=d_tol_rel
     )

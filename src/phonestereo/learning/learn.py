@@ -90,6 +90,7 @@ def learn_capture(
     ipd_m: float = IPD_M,
     source: str = "face-chart",
     depth_mode: DepthMode = "chart",
+    chart_pitch_m: float | None = None,
     backend: LandmarkBackend | None = None,
     guided: bool = True,
     images: tuple[Any, Any] | None = None,
@@ -111,6 +112,9 @@ def learn_capture(
     depth_mode : {"chart", "face"}
         One printed plane of faces, or real heads (see
         :func:`~phonestereo.learning.landmark_disparity.ipd_depths`).
+    chart_pitch_m : float, optional
+        The face chart's grid pitch: its eye midpoints, not the IPDs, scale the chart's plane
+        (:mod:`~phonestereo.learning.chart_pitch`).
     backend : LandmarkBackend, optional
         Default: :class:`MediaPipeBackend`.
     guided : bool
@@ -143,7 +147,8 @@ def learn_capture(
     faces_w, faces_t = det.detect_pair(img_w, img_t, guide)
     t1 = time.perf_counter()
     res = landmark_disparity(
-        rect, img_w, img_t, faces_w, faces_t, ipd_m=ipd_m, depth_mode=depth_mode
+        rect, img_w, img_t, faces_w, faces_t, ipd_m=ipd_m, depth_mode=depth_mode,
+        chart_pitch_m=chart_pitch_m,
     )
     t2 = time.perf_counter()
     timing = {"detect": t1 - t0, "disparity": t2 - t1, "total": t2 - t0}
