@@ -47,7 +47,8 @@ def test_no_pair_on_the_grid_leaves_the_scale() -> None:
     pupils = _chart(2.0, 0.0, 1.0)[:1]
     assert grid_scale([2.0], pupils, CAM) == (1.0, 0)
     # faces 1.5 pitch apart fit no grid length within 2.5 %
-    two = np.concatenate([_chart(2.0, 0.0, 1.0)[:1], _chart(2.0, 0.0, 1.0)[:1] + [[365.625, 0.0]]])
+    one = _chart(2.0, 0.0, 1.0)[:1]
+    two = np.concatenate([one, one + np.array([365.625, 0.0])])
     assert grid_scale([2.0, 2.0], two, CAM) == (1.0, 0)
 
 
