@@ -35,7 +35,7 @@ from unittest import mock
 import numpy as np
 
 import phonestereo.flows.learning as learning
-from phonestereo.fixes.radial_residual import correct_matches
+from phonestereo.fixes.radial_residual import radial_shift
 from phonestereo.fixes.wt_scale import WTScale
 from phonestereo.flows import application
 from phonestereo.flows.config import Corrector, FlowConfig
@@ -87,7 +87,7 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
         dm = np.array([o.d_measured_px for o in r.observations])
         dt, z = d_true(g, q, wt)
         if "F" in flags:
-            dm = dt if r.radial is None else correct_matches(r.radial, q, dt, np.zeros(len(q)))[0]
+            dm = dt if r.radial is None else dt - radial_shift(r.radial, q)[:, 0]
         de = np.array([o.d_expected_px for o in r.observations])
         if "R" in flags:
             zr = ref.backproject(q, dm)[:, 2]
@@ -104,7 +104,7 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
             return m
         d, _ = d_true(gt.capture(current["id"]), m.xy, m.wt)
         if k.get("radial") is not None:
-            d = correct_matches(k["radial"], m.xy, d, np.zeros(len(d)))[0]
+            d = d - radial_shift(k["radial"], m.xy)[:, 0]
         return replace(m, d=d, plane=fit_plane(m.xy, d, m.sigma_d))
 
     with ExitStack() as stack:

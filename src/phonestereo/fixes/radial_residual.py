@@ -87,7 +87,8 @@ def pool_radial(
 ) -> RadialResidualFix | None:
     """The captures' fits pooled: the median of their P(r) over a radius grid up to the smallest
     fitted radius, fitted again by P of ``degree`` (no offset: the ROI fits its own). None
-    without a fit."""
+    without a fit. Its ``rms_before_px`` / ``rms_after_px`` are the median curve's spread and
+    the refit's residual; ``n_used`` / ``n_total`` count the captures."""
     good = [f for f in fits if f is not None]
     if not good:
         return None
@@ -103,13 +104,19 @@ def pool_radial(
     )
 
 
-def correct_matches(fix: RadialResidualFix, xy: Any, d: Any, e: Any) -> tuple[Any, Any]:
-    """(d, e) of rectified matches less δ(q) = P(min(r, ρ))·û, px (N,) each."""
+def radial_shift(fix: RadialResidualFix, xy: Any) -> Any:
+    """δ(q) = P(min(r, ρ))·û at rectified pixels (N, 2) → (N, 2), px: its x part is what a
+    disparity carries, its y part what e carries."""
     q = as_points(xy, 2, "xy").reshape(-1, 2)
     r, u = radial_geometry(q, fix.center_px)
-    p = fix.radial(np.minimum(r, fix.radius_scale_px))
-    dv = np.asarray(d, dtype=np.float64).reshape(-1) - p * u[:, 0]
-    ev = np.asarray(e, dtype=np.float64).reshape(-1) - p * u[:, 1]
+    return fix.radial(np.minimum(r, fix.radius_scale_px))[:, None] * u
+
+
+def correct_matches(fix: RadialResidualFix, xy: Any, d: Any, e: Any) -> tuple[Any, Any]:
+    """(d, e) of rectified matches less δ(q) (:func:`radial_shift`), px (N,) each."""
+    delta = radial_shift(fix, xy)
+    dv = np.asarray(d, dtype=np.float64).reshape(-1) - delta[:, 0]
+    ev = np.asarray(e, dtype=np.float64).reshape(-1) - delta[:, 1]
     return dv, ev
 
 
@@ -130,4 +137,5 @@ __all__ = [
     "fit_capture_radial",
     "pool_radial",
     "radial_from_dict",
+    "radial_shift",
 ]

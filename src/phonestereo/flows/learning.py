@@ -30,7 +30,7 @@ import numpy as np
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend
 from phonestereo.fixes.distortion import RadialResidualFix
-from phonestereo.fixes.radial_residual import correct_matches, fit_capture_radial
+from phonestereo.fixes.radial_residual import fit_capture_radial, radial_shift
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_backend
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
@@ -239,10 +239,11 @@ def learn_face_capture(
             radial = fit_capture_radial(m.xy, m.e, wt.center_px)
             stages["radial_residual"] = None if radial is None else radial.to_dict()
             if radial is not None:
-                xy = np.array([[o.x_px, o.y_px] for o in obs])
-                d_obs = [o.d_measured_px for o in obs]
-                d = correct_matches(radial, xy, d_obs, np.zeros(len(obs)))[0]
-                obs = tuple(replace(o, d_measured_px=float(v)) for o, v in zip(obs, d, strict=True))
+                dx = radial_shift(radial, np.array([[o.x_px, o.y_px] for o in obs]))[:, 0]
+                obs = tuple(
+                    replace(o, d_measured_px=o.d_measured_px - float(v))
+                    for o, v in zip(obs, dx, strict=True)
+                )
     if config.orientation_buckets is False:
         obs = tuple(replace(o, orientation="all") for o in obs)
     return CaptureLearning(entry.id, obs, "", "", stages, tuple(gates), time.perf_counter() - t0,

@@ -333,11 +333,12 @@ class Rectification:
                            min(int(hi[0]), w), min(int(hi[1]), h))
             if box[2] <= box[0] or box[3] <= box[1]:
                 box = (0, 0, w, h)
-            if box[:2] != (0, 0) and n_valid == mx.size:  # no invalid pixel to keep
-                mx, my = mx - np.float32(box[0]), my - np.float32(box[1])
-            elif box[:2] != (0, 0):
-                mx = np.where(mx == np.float32(maps.INVALID), mx, mx - np.float32(box[0]))
-                my = np.where(my == np.float32(maps.INVALID), my, my - np.float32(box[1]))
+            if box[:2] != (0, 0):
+                if n_valid == mx.size:  # no invalid pixel to keep
+                    mx, my = mx - np.float32(box[0]), my - np.float32(box[1])
+                else:
+                    mx = np.where(mx == np.float32(maps.INVALID), mx, mx - np.float32(box[0]))
+                    my = np.where(my == np.float32(maps.INVALID), my, my - np.float32(box[1]))
             self._cache[key] = (box, mx, my)  # type: ignore[assignment]
         box, mx, my = self._cache[key]  # type: ignore[misc]
         return box, mx, my
