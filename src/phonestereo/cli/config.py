@@ -7,10 +7,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import error_exit
 from phonestereo.errors import InputError
 from phonestereo.flows.config_file import flow_config_json, flow_config_schema, load_flow_config
 
@@ -48,6 +47,5 @@ def show(
     try:
         cfg = load_flow_config(config)
     except InputError as exc:
-        Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     typer.echo(flow_config_json(cfg))

@@ -14,6 +14,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
+from phonestereo.cli.widgets import error_exit
 from phonestereo.errors import InputError, PhysicsError, StoreError
 from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
@@ -99,8 +100,7 @@ def depth(
                 results.append(application.run(cfg, inputs))
                 bar.advance(task)
     except (InputError, StoreError, PhysicsError) as exc:
-        console.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         doc = {
             "results": [r.to_dict() for r in results],
@@ -205,8 +205,7 @@ def evaluate(
                 progress=progress,
             )
     except (InputError, StoreError, PhysicsError) as exc:
-        console.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if report is not None:
         from phonestereo.report.bench_report import write_report
 

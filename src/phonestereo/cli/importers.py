@@ -16,7 +16,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import JSON_SUMMARY
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit
 from phonestereo.errors import InputError
 
 import_app = typer.Typer(
@@ -53,8 +53,7 @@ def _run(fn: Any, *args: Any, **kwargs: Any) -> Any:
     try:
         return fn(*args, **kwargs)
     except InputError as exc:
-        Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
 
 
 @import_app.command("android")

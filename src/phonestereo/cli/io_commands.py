@@ -9,10 +9,9 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import error_exit
 from phonestereo.errors import InputError
 from phonestereo.geometry.transform import SNAP_TOLERANCE, orthonormality_error
 from phonestereo.io import (
@@ -28,12 +27,6 @@ from phonestereo.io.opencv_yaml import read_opencv_yaml
 
 _YAML = (".yml", ".yaml", ".xml")
 _JSON = (".json",)
-
-
-def _fail(exc: InputError) -> typer.Exit:
-    # escape: messages hold brackets ("[x, y, w, h]") that Rich would read as markup.
-    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
-    return typer.Exit(2)
 
 
 def _size(text: str | None, name: str) -> tuple[int, int] | None:
@@ -93,7 +86,7 @@ def check_set(
                 if problem:
                     raise InputError(problem)
     except InputError as exc:
-        raise _fail(exc) from exc
+        raise error_exit(exc) from exc
     caps = cs.captures()
     times = [c.time_s for c in caps if c.time_s is not None]
     summary: dict[str, Any] = {
@@ -171,7 +164,7 @@ def convert_calibration(
             else save_calibration(dst, cal)
         )
     except InputError as exc:
-        raise _fail(exc) from exc
+        raise error_exit(exc) from exc
     c = calibration_summary(cal)
     snapped = r_dev > SNAP_TOLERANCE
     r_file = (extrinsics or src).name if src.suffix.lower() in _YAML else src.name

@@ -11,12 +11,11 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar
 from phonestereo.errors import InputError, StoreError
 from phonestereo.flows.config_file import load_flow_config
 from phonestereo.flows.learning import IpdMode, LearningResult
@@ -116,8 +115,7 @@ def learn(
                 ),
             )
     except (InputError, StoreError) as exc:
-        console.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         doc = {
             **res.to_dict(),

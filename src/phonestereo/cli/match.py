@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import figure_table
+from phonestereo.cli.widgets import error_exit, figure_table
 from phonestereo.errors import InputError
 from phonestereo.features.keypoints import DETECTORS
 from phonestereo.features.match_input import parse_roi
@@ -144,8 +144,7 @@ def match(
             config=cfg,
         )
     except InputError as exc:
-        console.print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps(out))
         return

@@ -9,11 +9,10 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.markup import escape
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import require_output_folder
-from phonestereo.cli.widgets import figure_table
+from phonestereo.cli.widgets import error_exit, figure_table
 from phonestereo.errors import InputError
 from phonestereo.io import load_calibration, read_gray, write_image
 from phonestereo.rectification import MODES, Rectification, RectifyOptions, check_mode
@@ -114,9 +113,7 @@ def rectify(
         )
         summary = rectify_files(calibration, mode, wide, tele, out, options, force=force)
     except InputError as exc:
-        # escape: messages hold brackets ("[x, y, w, h]") that Rich would read as markup.
-        Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps(summary))
         return

@@ -12,10 +12,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import error_exit
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
 from phonestereo.learning.store_open import open_for_reading
@@ -27,11 +26,6 @@ store_app = typer.Typer(
 app.add_typer(store_app, name="store")
 
 _FILE = typer.Argument(help="Fix store file (SQLite).", show_default=False)
-
-
-def _fail(exc: Exception) -> typer.Exit:
-    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
-    return typer.Exit(2)
 
 
 def _open(path: Path, write: bool = False) -> FixStore:
@@ -102,7 +96,7 @@ def stats(
             s = st.stats()
             integrity = st.integrity()
     except (StoreError, InputError) as exc:
-        raise _fail(exc) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps({**s.to_dict(), "integrity": integrity}, indent=1))
         return
@@ -121,7 +115,7 @@ def export(
         with _open(file) as st:
             n = st.export(out)
     except (StoreError, InputError) as exc:
-        raise _fail(exc) from exc
+        raise error_exit(exc) from exc
     typer.echo(f"wrote {n} observations to {out}")
 
 
@@ -132,5 +126,5 @@ def vacuum(file: Annotated[Path, _FILE]) -> None:
         with _open(file, write=True) as st:
             before, after = st.vacuum()
     except (StoreError, InputError) as exc:
-        raise _fail(exc) from exc
+        raise error_exit(exc) from exc
     typer.echo(f"vacuumed {file}: {_kb(before)} → {_kb(after)}")

@@ -1,4 +1,5 @@
-"""Pieces several commands' output shares: the ``--json`` summary flag, progress bars, tables.
+"""Pieces several commands' output shares: the ``--json`` summary flag, progress bars, tables,
+the error line of a typed error.
 
 No commands here (``app.discover`` finds none); the commands import these so that one option
 reads the same everywhere and one progress bar looks the same everywhere.
@@ -10,6 +11,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -22,6 +24,14 @@ from rich.table import Table
 
 #: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
 JSON_SUMMARY = Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+
+
+def error_exit(exc: Exception) -> typer.Exit:
+    """Print ``error: <message>`` in red on stderr and return the exit (status 2) to raise:
+    ``raise error_exit(exc) from exc``. The message is escaped: messages hold brackets
+    ("[x, y, w, h]") that Rich would read as markup."""
+    Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {escape(str(exc))}")
+    return typer.Exit(2)
 
 
 def progress_bar(

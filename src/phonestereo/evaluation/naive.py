@@ -63,10 +63,9 @@ def naive_depth(q_wide: Any, q_tele: Any, calibration: Calibration) -> Array:
 
     Parameters
     ----------
-    q_wide, q_tele : array_like, shape (..., 2)
-        Matching pixels in the wide and tele images.
-    calibration : Calibration
-        The factory calibration (B = |t| of its T_tele_wide, f = its wide focal length).
+    q_wide, q_tele, calibration
+        As for :func:`naive_disparity` (B = |t| of the calibration's T_tele_wide, f = its wide
+        focal length).
 
     Returns
     -------

@@ -18,6 +18,7 @@ scenario with known truth. The virtual phone is laid out like a real one:
 from __future__ import annotations
 
 import os
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -25,10 +26,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from phonestereo.errors import InputError
-from phonestereo.io import Calibration, Manifest
+from phonestereo.io import Calibration, CaptureEntry, Manifest
 from phonestereo.io.importers.android_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import STANDARD_GRAVITY, image_to_platform_K
-from phonestereo.sim.export_common import capture_doc, image_name, write_dump
+from phonestereo.sim.export_common import capture_docs, write_dump
 
 R0 = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 FIRST_FRAME_NS = 5_000_000_000
@@ -83,37 +84,32 @@ def android_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], 
         "cameras": {IDS["tele"]: _characteristics(cal, "tele"),
                     IDS["wide"]: _characteristics(cal, "wide")},
     }
-    captures = {}
-    for c in manifest.captures:
-        if c.gravity is None:
-            raise InputError(f"capture '{c.id}' has no gravity to export as an accelerometer")
-        acc = -STANDARD_GRAVITY * (R0.T @ np.asarray(c.gravity, dtype=np.float64))
-        if c.time_s is None:
-            raise InputError(f"capture '{c.id}' has no time_s: a Camera2 dump needs a timestamp")
-        cams = {}
-        for role in ("wide", "tele"):
-            cid = IDS[role]
-            res: dict[str, Any] = {
-                "image": f"images/{image_name(c, role, IDS)}",
-                "android.sensor.timestamp": FIRST_FRAME_NS + round(c.time_s * 1e9),
-                "android.control.afMode": 0 if c.focus_mode == "manual" else 1,
-                "android.distortionCorrection.mode": 0,
-            }
-            if role == "wide" and c.focus_position is not None:
-                res["android.lens.focusDistance"] = c.focus_position
-            if role == "tele":
-                ox, oy = TELE_CROP_OFFSET
-                w, h = cal.rig.tele.size
-                res["android.scaler.cropRegion"] = [ox, oy, ox + 2 * w, oy + 2 * h]
-            cams[cid] = res
-        motion = {"accelerometer": [float(v) for v in acc]}
-        captures[f"{c.id}.json"] = capture_doc(FORMAT_CAPTURE, c, motion, cams)
-    return session, captures
+    return session, capture_docs(
+        FORMAT_CAPTURE, manifest, "a Camera2 dump", _accelerometer, partial(_result, cal), IDS
+    )
+
+
+def _accelerometer(g: Any) -> dict[str, list[float]]:
+    return {"accelerometer": [float(v) for v in -STANDARD_GRAVITY * (R0.T @ g)]}
+
+
+def _result(cal: Calibration, c: CaptureEntry, role: str, time_s: float) -> dict[str, Any]:
+    res: dict[str, Any] = {
+        "android.sensor.timestamp": FIRST_FRAME_NS + round(time_s * 1e9),
+        "android.control.afMode": 0 if c.focus_mode == "manual" else 1,
+        "android.distortionCorrection.mode": 0,
+    }
+    if role == "wide" and c.focus_position is not None:
+        res["android.lens.focusDistance"] = c.focus_position
+    if role == "tele":
+        ox, oy = TELE_CROP_OFFSET
+        w, h = cal.rig.tele.size
+        res["android.scaler.cropRegion"] = [ox, oy, ox + 2 * w, oy + 2 * h]
+    return res
 
 
 def write_android_dump(
     folder: str | os.PathLike[str], cal: Calibration, manifest: Manifest, set_root: Path
 ) -> Path:
     """Write the dump into ``folder`` (session.json, captures/, images/ linked from the set)."""
-    session, captures = android_dump(cal, manifest)
-    return write_dump(folder, session, captures, manifest, set_root, IDS)
+    return write_dump(folder, *android_dump(cal, manifest), manifest, set_root, IDS)

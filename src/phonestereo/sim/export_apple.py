@@ -25,14 +25,13 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from phonestereo.errors import InputError
 from phonestereo.geometry import Camera
-from phonestereo.io import Calibration, Manifest
+from phonestereo.io import Calibration, CaptureEntry, Manifest
 from phonestereo.io.importers.apple import R_BACK
 from phonestereo.io.importers.apple_lut import apple_distort, image_grid, r_max
 from phonestereo.io.importers.apple_schema import FORMAT_CAPTURE, FORMAT_SESSION
 from phonestereo.io.importers.common import image_to_platform_K
-from phonestereo.sim.export_common import capture_doc, image_name, write_dump
+from phonestereo.sim.export_common import capture_docs, write_dump
 
 LUT_SIZE = 42
 FIRST_FRAME_S = 5.0
@@ -118,32 +117,26 @@ def apple_dump(cal: Calibration, manifest: Manifest) -> tuple[dict[str, Any], di
             IDS["wide"]: _calibration_data(cal.rig.wide, np.eye(3), np.zeros(3)),
         },
     }
-    captures = {}
-    for c in manifest.captures:
-        if c.gravity is None:
-            raise InputError(f"capture '{c.id}' has no gravity to export")
-        g = R_BACK.T @ np.asarray(c.gravity, dtype=np.float64)
-        if c.time_s is None:
-            raise InputError(f"capture '{c.id}' has no time_s: an Apple dump needs a timestamp")
-        cams = {}
-        for role in ("wide", "tele"):
-            shot: dict[str, Any] = {
-                "image": f"images/{image_name(c, role, IDS)}",
-                "timestamp_s": FIRST_FRAME_S + c.time_s,
-                "focusMode": 0 if c.focus_mode == "manual" else 2,
-            }
-            if c.focus_position is not None:
-                lp = c.focus_position * LENS_POSITION_PER_DIOPTRE
-                shot["lensPosition"] = min(1.0, max(0.0, lp))
-            cams[IDS[role]] = shot
-        motion = {"gravity": [float(v) for v in g]}
-        captures[f"{c.id}.json"] = capture_doc(FORMAT_CAPTURE, c, motion, cams)
-    return session, captures
+    return session, capture_docs(FORMAT_CAPTURE, manifest, "an Apple dump", _gravity, _shot, IDS)
+
+
+def _gravity(g: Any) -> dict[str, list[float]]:
+    return {"gravity": [float(v) for v in R_BACK.T @ g]}
+
+
+def _shot(c: CaptureEntry, role: str, time_s: float) -> dict[str, Any]:
+    shot: dict[str, Any] = {
+        "timestamp_s": FIRST_FRAME_S + time_s,
+        "focusMode": 0 if c.focus_mode == "manual" else 2,
+    }
+    if c.focus_position is not None:
+        lp = c.focus_position * LENS_POSITION_PER_DIOPTRE
+        shot["lensPosition"] = min(1.0, max(0.0, lp))
+    return shot
 
 
 def write_apple_dump(
     folder: str | os.PathLike[str], cal: Calibration, manifest: Manifest, set_root: Path
 ) -> Path:
     """Write the dump into ``folder`` (session.json, captures/, images/ linked from the set)."""
-    session, captures = apple_dump(cal, manifest)
-    return write_dump(folder, session, captures, manifest, set_root, IDS)
+    return write_dump(folder, *apple_dump(cal, manifest), manifest, set_root, IDS)

@@ -6,9 +6,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from phonestereo.errors import InputError
 from phonestereo.io import CaptureEntry, Manifest
 
 
@@ -32,6 +36,42 @@ def capture_doc(
         "cameras": cams,
     }
     return {k: v for k, v in doc.items() if v is not None}
+
+
+def capture_docs(
+    fmt: str,
+    manifest: Manifest,
+    dump: str,
+    motion: Callable[[np.ndarray], dict[str, list[float]]],
+    camera: Callable[[CaptureEntry, str, float], dict[str, Any]],
+    ids: dict[str, str],
+) -> dict[str, Any]:
+    """The capture files of a dump: {``<capture id>.json``: :func:`capture_doc`} for every
+    capture of ``manifest``.
+
+    ``motion(g)`` is the platform's motion vector from the capture's gravity ``g`` (shape (3,),
+    m/s² in the device frame); ``camera(c, role, time_s)`` the ``role`` camera's results, to
+    which the image (``images/``:func:`image_name`) is prepended; ``ids`` maps ``wide``/``tele``
+    to the platform's camera ids. ``dump`` names the dump in the errors (``a Camera2 dump``).
+
+    Raises
+    ------
+    InputError
+        A capture without gravity or ``time_s``: every platform dump records both.
+    """
+    docs = {}
+    for c in manifest.captures:
+        if c.gravity is None:
+            raise InputError(f"capture '{c.id}' has no gravity to export: {dump} needs one")
+        g = np.asarray(c.gravity, dtype=np.float64)
+        if c.time_s is None:
+            raise InputError(f"capture '{c.id}' has no time_s: {dump} needs a timestamp")
+        cams = {
+            ids[role]: {"image": f"images/{image_name(c, role, ids)}", **camera(c, role, c.time_s)}
+            for role in ("wide", "tele")
+        }
+        docs[f"{c.id}.json"] = capture_doc(fmt, c, motion(g), cams)
+    return docs
 
 
 def image_name(c: CaptureEntry, role: str, ids: dict[str, str]) -> str:

@@ -35,6 +35,11 @@ def map_panel(fig: Figure, ax: Any, xy: F64, v: F64, title: str, label: str, **k
     sc = ax.scatter(xy[:, 0], xy[:, 1], c=v, s=10, cmap=kw.pop("cmap", "viridis"), **kw)
     fig.colorbar(sc, ax=ax, label=label)
     ax.set_title(title, fontsize=9)
+    image_axes(ax)
+
+
+def image_axes(ax: Any) -> None:
+    """Axes over the rectified image: x and y labelled in pixels, y down, equal aspect."""
     ax.set_xlabel("rectified x [px]")
     ax.set_ylabel("rectified y [px]")
     ax.invert_yaxis()
@@ -180,6 +185,7 @@ def run_table(
 __all__ = [
     "MIN_ATTEMPTS",
     "captures_of_kind",
+    "image_axes",
     "json_clean",
     "label_axes",
     "map_panel",

@@ -38,6 +38,7 @@ from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
     captures_of_kind,
+    image_axes,
     label_axes,
     measure_each,
     open_set,
@@ -233,10 +234,7 @@ def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) ->
         fig.colorbar(sc, ax=ax, label="non-disparity error e [px]")
         ax.plot(*fix.center_px, "k+", ms=14, label="distortion centre")
         ax.set_title(f"e of every corner, {tag} (std {np.std(vals):.4f} px)")
-        ax.set_xlabel("rectified x [px]")
-        ax.set_ylabel("rectified y [px]")
-        ax.invert_yaxis()
-        ax.set_aspect("equal")
+        image_axes(ax)
         ax.legend(fontsize=8, loc="lower right")
     fig.suptitle(f"Residual distortion over the image ({MODE} rectification, all captures)")
     files.append(_save(fig, out_dir / "distortion_e_map.png"))

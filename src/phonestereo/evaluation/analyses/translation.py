@@ -34,6 +34,7 @@ from phonestereo.charts.verification import VerificationChart
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
     captures_of_kind,
+    image_axes,
     measure_each,
     open_set,
     seconds_since,
@@ -225,10 +226,7 @@ def write_figures(table: dict[str, Any], data: dict[str, Any], out_dir: Path) ->
             spread = table["modes"][mode]["spread_px"]
             tag = "before (rotation only)" if row == 0 else "after (canonical, §3.3 fix)"
             ax.set_title(f"{name}, {mode}: {tag}\nmean e near − far = {spread:.3f} px", fontsize=9)
-            ax.set_xlabel("rectified x [px]")
-            ax.set_ylabel("rectified y [px]")
-            ax.invert_yaxis()
-            ax.set_aspect("equal")
+            image_axes(ax)
     fig.suptitle("Dual-depth scene: d and e of every corner, near and far chart (thesis Fig. 3-10)")
     files = [_save(fig, out_dir / "translation_dual_depth.png")]
     fig = Figure(figsize=(8, 4.5), constrained_layout=True)
