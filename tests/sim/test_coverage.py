@@ -87,3 +87,23 @@ def test_random_modules_see_faces_and_circles(seed: int) -> None:
         if c.kind == "verification":
             z = pc.truth.roi_depth_m
             assert tele_blur_px(spec, c.focus_m, z) <= BLUR_BUDGET_PX + 1e-9
+
+
+def test_faces_take_the_verification_focus_regime() -> None:
+    # random-1013's ×4.2 periscope needs each verification stack focused on its chart (one
+    # manual focus would blur the tele by 33 px). Its faces, learned at one manual focus
+    # (1.81 m), taught the correction nothing of the tele's principal-point shift with focus,
+    # and the application's 0.8-4 m focus states turned it into a 2.7 % gain error (median
+    # 1.08 %); with the faces focused per stack too: 0.15 % (docs/module-random.md, session
+    # 12). So the planner focuses both alike.
+    plan = plan_scenario("thesis-bench", random_module(1013), 1013, config=QUICK)
+    faces = [pc for pc in plan.captures if pc.state.conditions.kind == "face"]
+    ver = [pc for pc in plan.captures if pc.state.conditions.kind == "verification"]
+    assert {round(pc.state.conditions.focus_m, 2) for pc in ver} == {
+        round(d, 2) for d in QUICK.verification.distances_m}
+    # each face stack is focused on its own chart: three focus states, one per distance
+    assert len({pc.state.conditions.focus_m for pc in faces}) == len(QUICK.learning.distances_m)
+    assert any("one focus regime" in n for n in plan.notes)
+    # a module whose verification chart keeps one focus keeps it for the faces too (1002)
+    plan = plan_scenario("thesis-bench", random_module(1002), 1002, config=QUICK)
+    assert {pc.state.conditions.focus_m for pc in plan.captures} == {1.5}

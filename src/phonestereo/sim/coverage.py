@@ -6,8 +6,10 @@ a fifth of the wide's, so a face does not fit in it and the verification chart's
 (the W-T scale) fall outside it. :func:`fit_distances` keeps a scenario's distances where they
 already fit and otherwise re-spaces them over the range that fits; :func:`fit_focus` keeps the
 scenario's manual focus when the tele's blur stays within the thesis module's and otherwise
-focuses each stack on its chart (the user taps the chart). Each change, and what the module
-cannot cover, is a note in the plan (``Plan.notes``, ``ground_truth.json``, ``simulate``).
+focuses each stack on its chart (the user taps the chart; the thesis bench then focuses its
+face stacks on theirs too, one focus regime for learning and application). Each change, and what
+the module cannot cover, is a note in the plan (``Plan.notes``, ``ground_truth.json``,
+``simulate``).
 
 The limits, from the module alone:
 
@@ -189,7 +191,8 @@ def fit_config(config: Any, module: ModuleSpec, what: str, notes: list[str]) -> 
     range_m = cov.face_range_m if what == "faces" else cov.verification_range_m
     planned = fit_distances(tuple(config.distances_m), range_m)
     focus_m, per_distance = fit_focus(module, planned, config.focus_m)
-    per_distance = per_distance or config.focus_per_distance
+    if config.focus_per_distance:  # asked for: no one manual focus to choose
+        focus_m, per_distance = config.focus_m, True
     notes += plan_notes(what, module, tuple(config.distances_m), planned, range_m, focus_m,
                         per_distance and not config.focus_per_distance, config.focus_m)
     return replace(config, distances_m=planned, focus_m=focus_m, focus_per_distance=per_distance)

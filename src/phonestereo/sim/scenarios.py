@@ -28,7 +28,7 @@ landscape; charts face the device.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -305,8 +305,20 @@ def plan_verification(module: ModuleSpec, seed: int, cfg: VerificationConfig) ->
 
 
 def plan_thesis_bench(module: ModuleSpec, seed: int, cfg: BenchConfig) -> Plan:
+    """Learning then verification. One focus regime for both: when the verification chart has
+    to be focused per distance (the user taps the chart, :func:`~phonestereo.sim.coverage.
+    fit_focus`), so are the face stacks. A learned correction holds only for the focus states it
+    was learned at (the tele's principal point and distortion move with its lens, §3.2): faces
+    at one manual focus taught random-1013 a 2.7 % gain error that per-distance focus removes
+    (docs/module-random.md, session 12)."""
     p = Planner("thesis-bench", module, seed, "learning + verification (docs/architecture.md)")
-    t = _plan_learning(p, module, cfg.learning, cfg.learning.timing.start_s)
+    learn = cfg.learning
+    if not learn.focus_per_distance and fit_config(cfg.verification, module, "", []
+                                                   ).focus_per_distance:
+        learn = replace(learn, focus_per_distance=True)
+        p.notes.append("faces: each stack focused on its chart, as the verification chart is "
+                       "(one focus regime for learning and application)")
+    t = _plan_learning(p, module, learn, learn.timing.start_s)
     _plan_verification(p, module, cfg.verification, t)
     return p.plan()
 
