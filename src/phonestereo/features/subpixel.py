@@ -35,6 +35,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
+from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
 from phonestereo.features.crlb import sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
@@ -252,6 +253,7 @@ def refine_lk(
     InputError
         A window is not inside ``left``.
     """
+    retain_freed_memory()  # the windows' arrays are megabytes (features/_heap.py)
     xy = np.asarray(xy, dtype=np.int64).reshape(-1, 2)
     n, r = len(xy), int(radius)
     h, w = left.shape
