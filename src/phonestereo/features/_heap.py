@@ -8,7 +8,9 @@ once more than ``M_TRIM_THRESHOLD`` of it is free, and maps blocks above
 freed so far); each page of such memory is faulted in again on its next use. At 2000 × 1500
 that was ~5000 page faults per ``measure_roi`` (~2 µs each on the 2-core machine: ~10 % of
 its CPU). With fixed thresholds of 32 MB (glibc's own dynamic maximum) and 64 MB the process
-keeps up to 64 MB of freed heap per arena and reuses it: ~700 faults.
+keeps up to 64 MB of freed heap per arena and reuses it: ~700 faults. (A process that has
+already run the learning flow had raised glibc's own thresholds far enough: there
+``measure_roi`` faults ~0 times either way; the setting pays in a fresh process.)
 
 Linux with glibc only (elsewhere, or with ``MALLOC_TRIM_THRESHOLD_`` / ``MALLOC_MMAP_THRESHOLD_``
 already set, or ``PHONESTEREO_MALLOC=default``, nothing is changed). Process-wide and set once:
