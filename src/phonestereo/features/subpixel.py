@@ -35,6 +35,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
+from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
 from phonestereo.features.crlb import sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
@@ -140,6 +141,25 @@ def _wsum(a: NDArray[Any], w: NDArray[Any]) -> NDArray[Any]:
     return np.einsum("kp,p->k", a, w)
 
 
+def _with_const(basis_part: F64, const: F64) -> F64:
+    """(k, q) = [basis_part (k, q − 1), const (k,)]: a moment over the basis with its constant
+    row appended last."""
+    return np.concatenate([basis_part, const[:, None]], axis=1)
+
+
+def _moments(bw: F64, b: NDArray[Any], w: F64, corner: float) -> F64:
+    """Σ_p bw_i·b_j over a basis with its constant row appended last, shape (k, q, q):
+    ``bw`` (k, q − 1, M²) the weighted rows, ``b`` their partners, ``w`` (M²,) the weight
+    that makes a row of ``b`` one of ``bw`` (so Σ bw_const·b_j = Σ w·b_j) and ``corner`` the
+    constant row's own moment."""
+    k, q = bw.shape[0], bw.shape[1] + 1
+    g = np.empty((k, q, q))
+    g[:, :-1, :-1] = np.einsum("kqp,krp->kqr", bw, b)
+    g[:, :-1, -1] = g[:, -1, :-1] = _wsum(b.reshape(-1, b.shape[-1]), w).reshape(k, q - 1)
+    g[:, -1, -1] = corner
+    return g
+
+
 def gaussian_window(radius: int, sigma_w: float) -> F64:
     """Weights exp(−(u² + v²) / 2σ²) on the (2r + 1)² window, peak 1, shape (M, M)."""
     u = np.arange(-radius, radius + 1, dtype=np.float64)
@@ -233,6 +253,7 @@ def refine_lk(
     InputError
         A window is not inside ``left``.
     """
+    retain_freed_memory()  # the windows' arrays are megabytes (features/_heap.py)
     xy = np.asarray(xy, dtype=np.int64).reshape(-1, 2)
     n, r = len(xy), int(radius)
     h, w = left.shape
@@ -264,14 +285,15 @@ def _refine(
     wn = wts / wts.sum()
     u = np.arange(-r, r + 1, dtype=np.float64)
     uu, vv = np.tile(u, 2 * r + 1), np.repeat(u, 2 * r + 1)
-    # fixed basis [L_x, L_y, (u·L_x, v·L_x,) 1] and its weighted moments (float64, per window)
+    # fixed basis [L_x, L_y, (u·L_x, v·L_x,) 1] and its weighted moments (float64 sums, per
+    # window). The constant row is not stored and only the weighted rows are float64: these
+    # (n, q, M²) arrays are megabytes, and fresh megabytes cost page faults on every call.
     parts = [tgx, tgy, uu * tgx, vv * tgx] if slant else [tgx, tgy]
-    basis = np.stack([*np.broadcast_arrays(*parts), np.ones((n, len(uu)))], axis=1)
-    bw = basis * wts  # (n, q − 1, M²)
-    gram1 = np.einsum("kqp,krp->kqr", bw, basis)  # Σ w b_i b_j
-    gram2 = np.einsum("kqp,krp->kqr", bw * wts, basis)  # Σ w² b_i b_j
-    t64 = tmpl.astype(np.float64)
-    bt = np.einsum("kqp,kp->kq", bw, t64)  # Σ w b_i L
+    base = np.stack(np.broadcast_arrays(*parts), axis=1)  # float32 without slant (exact)
+    bw = base * wts  # (n, q − 2, M²), float64: Σ over p of bw·x is Σ w b_i x
+    gram1 = _moments(bw, base, wts, wts.sum())  # Σ w b_i b_j, the constant row included
+    gram2 = _moments(bw, bw, wts, (wts * wts).sum())  # Σ w² b_i b_j
+    bt = _with_const(np.einsum("kqp,kp->kq", bw, tmpl), _wsum(tmpl, wts))  # Σ w b_i L
     wn32 = wn.astype(np.float32)
     theta = np.zeros((n, N_PARAMS))
     theta[:, 0], theta[:, 1] = d0, e0
@@ -297,11 +319,11 @@ def _refine(
             sr = np.sqrt(np.maximum(_wsum((val32 - mr[:, None]) ** 2, wn32), 0))
             th[:, 2] = st / np.maximum(sr, 1e-6)
             th[:, 3] = mt - th[:, 2] * mr
-        v64 = val32.astype(np.float64)
+        vw = val32 * wts  # w·R, float64
         a, b = th[:, 2].copy(), th[:, 3].copy()
         g1 = gram1[sel]
-        pv = np.einsum("kqp,kp->kq", bw[sel], v64)  # Σ w b_i R
-        rr, rl = _wsum(v64 * v64, wts), _wsum(v64 * t64[sel], wts)  # Σ w R², Σ w R L
+        pv = _with_const(np.einsum("kqp,kp->kq", bw[sel], val32), vw.sum(axis=1))  # Σ w b_i R
+        rr, rl = np.einsum("kp,kp->k", vw, val32), np.einsum("kp,kp->k", vw, t)  # Σ w R², R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
@@ -324,20 +346,22 @@ def _refine(
         if fin.any():  # statistics from this (last) evaluation: the step was below tol
             i = np.flatnonzero(fin)
             ai = active[i]
-            g2 = _gram(
+            vwi = vw[i]
+            g2 = _gram(  # Σ w² [b, R] [b, R]
                 gram2[ai],
-                np.einsum("kqp,kp->kq", bw[ai], v64[i] * wts),
-                _wsum(v64[i] ** 2, wts**2),
+                _with_const(np.einsum("kqp,kp->kq", bw[ai], vwi), _wsum(vwi, wts)),
+                np.einsum("kp,kp->k", vwi, vwi),
             )
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())
             cov[ai] = c_cov[:, :2, :2]
-            res = t64[ai] - a[i, None] * v64[i] - b[i, None]
+            res = tmpl[ai] - a[i, None] * val32[i] - b[i, None]  # float64
             rvar[ai] = _wsum(res * res, wts) / np.maximum(dof, 1.0)
             if influence:  # G = rows (d, e) of H⁻¹·C times the weighted basis [b, R]
                 resid[ai] = res
                 hc, _ = solve_spd(hess[i], c)
-                full = np.concatenate([bw[ai], (v64[i] * wts)[:, None, :]], axis=1)
+                const = np.broadcast_to(wts, (len(i), 1, len(wts)))
+                full = np.concatenate([bw[ai], const, vwi[:, None, :]], axis=1)
                 infl[ai] = hc[:, :2] @ full
             tc = t[i] - _wsum(t[i], wn32)[:, None]
             vc = val32[i] - _wsum(val32[i], wn32)[:, None]

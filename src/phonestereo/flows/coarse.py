@@ -78,7 +78,7 @@ def coarse_search(
     xs0, xs1 = max(0, x - d_max), min(W, x + w - d_min)
     ys0, ys1 = max(0, y - rows), min(H, y + h + rows)
     strip = np.ascontiguousarray(right[ys0:ys1, xs0:xs1], dtype=dtype)
-    if strip.shape[0] < h or strip.shape[1] < w or float(tpl.std()) < 1e-3:
+    if strip.shape[0] < h or strip.shape[1] < w or pixel_std(tpl) < 1e-3:
         return _NO_PEAK
     score = cv2.matchTemplate(strip, tpl, cv2.TM_CCOEFF_NORMED)
     col = score.max(axis=0)  # best row per shift
