@@ -190,9 +190,11 @@ def fit_config(config: Any, module: ModuleSpec, what: str, notes: list[str]) -> 
     cov = module_coverage(module, getattr(config, "roi_px", (200, 150)))
     range_m = cov.face_range_m if what == "faces" else cov.verification_range_m
     planned = fit_distances(tuple(config.distances_m), range_m)
-    focus_m, per_distance = fit_focus(module, planned, config.focus_m)
     if config.focus_per_distance:  # asked for: no one manual focus to choose
-        focus_m, per_distance = config.focus_m, True
+        focus_m, per_distance, chosen = config.focus_m, True, False
+    else:
+        focus_m, per_distance = fit_focus(module, planned, config.focus_m)
+        chosen = per_distance
     notes += plan_notes(what, module, tuple(config.distances_m), planned, range_m, focus_m,
-                        per_distance and not config.focus_per_distance, config.focus_m)
+                        chosen, config.focus_m)
     return replace(config, distances_m=planned, focus_m=focus_m, focus_per_distance=per_distance)

@@ -313,8 +313,8 @@ def plan_thesis_bench(module: ModuleSpec, seed: int, cfg: BenchConfig) -> Plan:
     (docs/module-random.md, session 12)."""
     p = Planner("thesis-bench", module, seed, "learning + verification (docs/architecture.md)")
     learn = cfg.learning
-    if not learn.focus_per_distance and fit_config(cfg.verification, module, "", []
-                                                   ).focus_per_distance:
+    verification = fit_config(cfg.verification, module, "verification chart", [])  # notes later
+    if not learn.focus_per_distance and verification.focus_per_distance:
         learn = replace(learn, focus_per_distance=True)
         p.notes.append("faces: each stack focused on its chart, as the verification chart is "
                        "(one focus regime for learning and application)")
