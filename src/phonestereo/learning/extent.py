@@ -14,7 +14,12 @@ together unless σ carries them:
   between the factory calibration and use, §3.5). σ_sys = rho · d;
 - **extrapolation in disparity**: beyond the learned disparities the correction's gain is
   only as good as the capture-level regression of offset on disparity says (captures, not
-  faces, are the independent units); σ_x = σ_gain · (distance outside the learned range);
+  faces, are the independent units); σ_x = σ_gain · (distance outside the learned range).
+  When the learning captures' times (or temperatures) move with their distances, a warm-up
+  drift is indistinguishable from a gain: the gain's σ with the drift in the fit
+  (``drift_gain_sigma``, :attr:`~phonestereo.learning.heating_term.HeatingTerm.gain_sigma`)
+  then applies about the learned centre d̄ at every disparity, σ = σ_g,drift · |d − d̄|
+  (the larger of the two is taken);
 - **extrapolation over the sensor**: a query far from every learned sensor position carries
   the capture-to-capture scatter once more per unit of distance beyond ``reach``.
 
@@ -72,6 +77,11 @@ class LearnedExtent:
     reach_px: float
     n_captures: int
     tree: Any
+    #: σ of the gain with a drift over the learning captures' time or temperature in the fit,
+    #: px/px (NaN: not known; module docstring).
+    drift_gain_sigma: float = float("nan")
+    #: d̄, the learned captures' mean measured disparity, px (where the offset is pinned).
+    d_centre_px: float = float("nan")
 
     @classmethod
     def from_observations(
@@ -80,9 +90,11 @@ class LearnedExtent:
         residual_px: Any = None,
         *,
         focal_rel_sigma: float = FOCAL_REL_SIGMA,
+        drift_gain_sigma: float = float("nan"),
     ) -> LearnedExtent:
         """From learned observations (one bucket) and, when given, their residuals about the
-        fitted correction (px; default: about their mean)."""
+        fitted correction (px; default: about their mean) and the gain's σ with the drift in
+        the fit (px/px, :class:`~phonestereo.learning.heating_term.HeatingTerm`)."""
         obs = as_observation_array(observations)
         c = corrections_px(obs)
         r = c - np.mean(c) if residual_px is None else np.asarray(residual_px, dtype=np.float64)
@@ -109,6 +121,7 @@ class LearnedExtent:
         return cls(
             float(lo), float(hi), rho, float(rho_c),
             gain_sigma, float(cap), reach, g, cKDTree(xy) if len(xy) else None,
+            float(drift_gain_sigma), float(np.mean(mean_d)) if g else float("nan"),
         )
 
     def outside_px(self, d: Any) -> np.ndarray:
@@ -124,6 +137,8 @@ class LearnedExtent:
         dd = self.outside_px(q[:, 2])
         with np.errstate(invalid="ignore"):
             ext = np.where(dd > 0, self.gain_sigma * dd, 0.0)
+        if np.isfinite(self.drift_gain_sigma) and np.isfinite(self.d_centre_px):
+            ext = np.maximum(ext, self.drift_gain_sigma * np.abs(q[:, 2] - self.d_centre_px))
         if self.tree is not None:
             dist, _ = self.tree.query(q[:, :2])
             ext = np.hypot(ext, self.capture_sigma_px * np.maximum(dist / self.reach_px - 1, 0))
@@ -136,6 +151,8 @@ class LearnedExtent:
             "rho": round(self.rho, 6), "rho_captures": round(self.rho_captures, 6),
             "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
             "capture_sigma_px": round(self.capture_sigma_px, 5), "n_captures": self.n_captures,
+            "drift_gain_sigma": None if not np.isfinite(self.drift_gain_sigma) else round(
+                self.drift_gain_sigma, 6),
         }
 
 

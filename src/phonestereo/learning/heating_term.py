@@ -26,6 +26,14 @@ absent and says why; the same fit against the capture time then
 gives, when its slope is significant, a σ for the drift still to come (not a correction: the
 warm-up curve's τ is unknown, see :attr:`HeatingTerm.index`).
 
+Either way the fit also says how well the captures tell the **gain** g from a drift
+(:attr:`HeatingTerm.gain_sigma`, its σ with the drift term in the fit). Faces learned near to
+far while the module still warms make time and disparity collinear: the drift cannot be
+separated from a gain, the field learns it as one, and only this σ shows it (random-1009: the
+learned gain read +1.95 %, +1.08 % with the faces' distances interleaved in time; the
+captures' gain 1.96 ± 0.27 % alone, 1.16 ± 0.51 % with a linear drift in time, so σ_g =
+0.51 % ⊕ 0.80 %; docs/module-random.md, session 13).
+
 Examples
 --------
 >>> import numpy as np
@@ -95,6 +103,13 @@ class HeatingTerm:
     #: τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
     #: ``FlowConfig.warmup_s`` / 2.6).
     tau_s: float = 70.0
+    #: σ of the gain over disparity (px per px of d) in the same capture-level fit, the drift
+    #: allowed for, ⊕ (unless a temperature term takes the drift out of the observations) how
+    #: far allowing for the drift moves the gain from the fit without it: what the captures
+    #: can tell of the gain when their times or temperatures move with their distances (module
+    #: docstring); NaN when the fit could not be made. Set whether or not the drift itself is
+    #: significant.
+    gain_sigma: float = float("nan")
 
     @classmethod
     def fit(
@@ -137,7 +152,7 @@ class HeatingTerm:
         x = np.column_stack(cols)
         use = np.ones(g, dtype=bool)
         for _ in range(2):  # one robust pass: drop captures beyond 3 robust σ, refit
-            beta, k_sigma, res = _ols(x[use], c_i[use])
+            beta, sd, res = _ols(x[use], c_i[use])
             if beta is None:
                 return cls(False, f"the captures' disparities, {index} and positions are "
                            "collinear: the heating slope cannot be told", range_c=(lo, hi),
@@ -148,12 +163,18 @@ class HeatingTerm:
             if new.sum() < x.shape[1] + 2 or np.array_equal(new, use):
                 break
             use = new
-        k = float(beta[2])
+        k, k_sigma = float(beta[2]), float(sd[2])
+        applied = abs(k) > SIGNIFICANCE * k_sigma and index == "temperature_c"
+        # The gain's σ with the drift in the fit; unless the drift is taken out of the
+        # observations (an applied temperature term), ⊕ how far allowing for it moves the gain.
+        alone, _, _ = _ols(np.delete(x[use], 2, axis=1), c_i[use])
+        shift = 0.0 if applied or alone is None else float(beta[1] - alone[1])
+        g_sigma = float(np.hypot(sd[1], shift))
         if not abs(k) > SIGNIFICANCE * k_sigma:
             return cls(False, f"no significant drift over the learning captures' {index}: "
-                       f"{k:.3g} ± {k_sigma:.2g} px per unit", k, float(k_sigma), ref, (lo, hi),
-                       int(use.sum()), index, tau_s)
-        return cls(True, "", k, float(k_sigma), ref, (lo, hi), int(use.sum()), index, tau_s)
+                       f"{k:.3g} ± {k_sigma:.2g} px per unit", k, k_sigma, ref, (lo, hi),
+                       int(use.sum()), index, tau_s, g_sigma)
+        return cls(True, "", k, k_sigma, ref, (lo, hi), int(use.sum()), index, tau_s, g_sigma)
 
     def offset_px(self, temperature_c: Any) -> tuple[np.ndarray, np.ndarray]:
         """(k·(T − T_ref), σ_k·|T − T_ref|) at temperatures (°C; NaN or no term → 0, 0); for
@@ -186,21 +207,21 @@ class HeatingTerm:
                 self.reference_c, 4),
             "range_c": [None if not np.isfinite(v) else round(v, 4) for v in self.range_c],
             "n_captures": self.n_captures,
+            "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
         }
 
 
-def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, float, np.ndarray]:
-    """(β, σ of β[2], residuals) of y ≈ x·β; β None when x is (nearly) rank-deficient."""
+def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
+    """(β, σ of each β, residuals) of y ≈ x·β; β None (σ inf) when x is (nearly)
+    rank-deficient."""
     n, p = x.shape
-    if n <= p:
-        return None, float("inf"), np.zeros(n)
-    if np.linalg.cond(x) > 1e8:
-        return None, float("inf"), np.zeros(n)
+    if n <= p or np.linalg.cond(x) > 1e8:
+        return None, np.full(p, np.inf), np.zeros(n)
     beta, *_ = np.linalg.lstsq(x, y, rcond=None)
     res = y - x @ beta
     s2 = float(res @ res) / (n - p)
     cov = s2 * np.linalg.inv(x.T @ x)
-    return beta, float(np.sqrt(max(cov[2, 2], 0.0))), res
+    return beta, np.sqrt(np.maximum(np.diag(cov), 0.0)), res
 
 
 __all__ = ["MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm"]
