@@ -30,7 +30,7 @@ def test_one_distance_leaves_the_gain_unknown_and_the_far_capture_unbounded() ->
     assert not np.isfinite(ext.gain_sigma)  # one distance: no slope over disparity
     sys_px, extra = ext.extra_sigma_px([[1000.0, 750.0, 12.0], [1000.0, 750.0, 4.5]])
     assert extra[0] == 0.0 and not np.isfinite(extra[1])
-    # the systematic part is at least the focal prior: ρ ≥ 0.4 % of the disparity
+    # the systematic part is at least the focal prior: ρ ≥ 0.25 % of the disparity
     assert sys_px[0] >= FOCAL_REL_SIGMA * 12.0
 
 
