@@ -177,7 +177,7 @@ def equalise_blur(
 
     right = background(ladder, 1)
     left_scores = ladder(0)
-    scores = [s00] + [v for pair in zip(left_scores, right.result()) for v in pair]
+    scores = [s00] + [v for pair in zip(left_scores, right.result(), strict=True) for v in pair]
     best = (scores[0], 0.0, 0.0)
     for i in range(1, len(cands), 2):
         best = max(best, (scores[i], *cands[i]), (scores[i + 1], *cands[i + 1]))
