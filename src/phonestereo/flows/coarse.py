@@ -223,7 +223,10 @@ def parabola_vertex(v: Any, k: int) -> float:
     if k == 0 or len(v) < 3:
         return 0.0
     den = float(v[0] - 2 * v[1] + v[2])
-    return float(np.clip(0.5 * (v[0] - v[2]) / den, -0.5, 0.5)) if den < 0 else 0.0
+    if not den < 0:
+        return 0.0
+    # min/max, not np.clip (~3 µs per call on a scalar): the same value
+    return float(min(max(0.5 * (v[0] - v[2]) / den, -0.5), 0.5))
 
 
 def tile_wt_scale(
