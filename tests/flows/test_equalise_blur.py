@@ -100,3 +100,9 @@ def test_tile_shift_is_opencvs_lanczos_warp() -> None:
         worst = max(worst, float(np.abs(_shifted(tile, m[0, 2], m[1, 2], 60) - ref).max()))
     # float32 rounding of 64-term sums of values up to 255: measured 2e-4 DN (1e-6 relative)
     assert worst < 1e-3
+    # a shift beyond the filter's border is OpenCV's own warp, exactly
+    tile = rng.uniform(0, 255, (66, 66)).astype(np.float32)
+    m = np.float32([[1, 0, 9.3], [0, 1, -6.2]])
+    ref = cv2.warpAffine(tile, m, (60, 60), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                         borderMode=cv2.BORDER_REFLECT)
+    assert np.array_equal(_shifted(tile, m[0, 2], m[1, 2], 60), ref)

@@ -118,11 +118,17 @@ def _shifted(tile: Any, sx: float, sy: float, n: int) -> Any:
     # warpAffine's coordinates: 10 fractional bits, rounded to its 5 (INTER_BITS)
     qx = (int(np.rint(float(np.float32(sx)) * 1024)) + 16) >> 5
     qy = (int(np.rint(float(np.float32(sy)) * 1024)) + 16) >> 5
-    p = 8  # the mirror border for the taps' reach (3 before, 4 after) beyond a ±4 px shift
+    p = 8  # the mirror border for the taps' reach (3 before, 4 after) beyond the shift
+    x0, y0 = p + (qx >> 5), p + (qy >> 5)
+    h, w = tile.shape[:2]
+    if min(x0, y0) < 3 or x0 + n + 4 > w + 2 * p or y0 + n + 4 > h + 2 * p:
+        # farther than the tiles' ±(_ALIGN + ½) px alignment reaches: OpenCV itself
+        m = np.array([[1, 0, sx], [0, 1, sy]], np.float32)
+        return cv2.warpAffine(tile, m, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_REFLECT)
     padded = cv2.copyMakeBorder(tile, p, p, p, p, cv2.BORDER_REFLECT)
     out = cv2.sepFilter2D(padded, cv2.CV_32F, _LANCZOS4[qx & 31], _LANCZOS4[qy & 31],
                           anchor=(3, 3), borderType=cv2.BORDER_REFLECT)
-    x0, y0 = p + (qx >> 5), p + (qy >> 5)
     return out[y0 : y0 + n, x0 : x0 + n]
 
 
