@@ -10,7 +10,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from phonestereo.features._threads import run_split
+from phonestereo.features._threads import background, run_split
 from phonestereo.flows.coarse import pixel_std, template_peak
 
 
@@ -81,13 +81,55 @@ def _aligned_tiles(
             tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
             dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
             # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
-            M = np.array([[1, 0, r + dx], [0, 1, r + dy]], np.float32)
-            tb = cv2.warpAffine(tb, M, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
-                                borderMode=cv2.BORDER_REFLECT)
-            out[i] = (ta, tb)
+            out[i] = (ta, _shifted(tb, r + dx, r + dy, n))
 
     run_split(align, range(len(starts)), min_items=8)
     return [p for p in out if p is not None]
+
+
+def _lanczos4_taps(x: float) -> Any:
+    """OpenCV's Lanczos-4 taps (imgwarp.cpp ``interpolateLanczos4``) at the fraction x of a
+    pixel, float32 (8,): the sinc window in double, each tap rounded, normalised in float32."""
+    if x < np.finfo(np.float32).eps:
+        return np.eye(8, dtype=np.float32)[3]
+    s45 = np.sqrt(0.5)
+    cs = ((1, 0), (-s45, -s45), (0, 1), (s45, -s45), (-1, 0), (s45, s45), (0, -1), (-s45, s45))
+    y0 = -(x + 3) * np.pi * 0.25
+    s0, c0 = np.sin(y0), np.cos(y0)
+    taps = np.zeros(8, np.float32)
+    total = np.float32(0)
+    for i, (a, b) in enumerate(cs):
+        y = -(x + 3 - i) * np.pi * 0.25
+        taps[i] = np.float32((a * s0 + b * c0) / (y * y))
+        total = np.float32(total + taps[i])
+    return taps * (np.float32(1) / total)
+
+
+#: The 32 fractions (1/32 px) of OpenCV's interpolation tables, each row its 8 taps.
+_LANCZOS4 = np.array([_lanczos4_taps(float(np.float32(k / 32))) for k in range(32)], np.float32)
+
+
+def _shifted(tile: Any, sx: float, sy: float, n: int) -> Any:
+    """out(u, v) = tile(u + sx, v + sy) for u, v < n by Lanczos-4, mirror border: what
+    ``cv2.warpAffine`` with [[1, 0, sx], [0, 1, sy]] (WARP_INVERSE_MAP, INTER_LANCZOS4,
+    BORDER_REFLECT) gives — the same 1/32-px fixed-point shift and taps — as one separable
+    8 × 8 filter (cv2.sepFilter2D): ~3× faster on a 60-px tile, within 1e-6 relative (float32
+    sums in another order)."""
+    # warpAffine's coordinates: 10 fractional bits, rounded to its 5 (INTER_BITS)
+    qx = (int(np.rint(float(np.float32(sx)) * 1024)) + 16) >> 5
+    qy = (int(np.rint(float(np.float32(sy)) * 1024)) + 16) >> 5
+    p = 8  # the mirror border for the taps' reach (3 before, 4 after) beyond the shift
+    x0, y0 = p + (qx >> 5), p + (qy >> 5)
+    h, w = tile.shape[:2]
+    if min(x0, y0) < 3 or x0 + n + 4 > w + 2 * p or y0 + n + 4 > h + 2 * p:
+        # farther than the tiles' ±(_ALIGN + ½) px alignment reaches: OpenCV itself
+        m = np.array([[1, 0, sx], [0, 1, sy]], np.float32)
+        return cv2.warpAffine(tile, m, (n, n), flags=cv2.INTER_LANCZOS4 | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_REFLECT)
+    padded = cv2.copyMakeBorder(tile, p, p, p, p, cv2.BORDER_REFLECT)
+    out = cv2.sepFilter2D(padded, cv2.CV_32F, _LANCZOS4[qx & 31], _LANCZOS4[qy & 31],
+                          anchor=(3, 3), borderType=cv2.BORDER_REFLECT)
+    return out[y0 : y0 + n, x0 : x0 + n]
 
 
 def equalise_blur(
@@ -157,16 +199,28 @@ def equalise_blur(
         num = float(np.einsum("ijk,ijk->", pa, pb))
         return num / np.sqrt(sp * sq + 1e-12)
 
-    # every candidate (left blurred, right blurred) scored, half on the helper thread, then
-    # compared in the order of the loop they replace (ties go to the earlier one)
+    # The candidates (left blurred, right blurred) compared in the order of the loop they
+    # replace (ties go to the earlier one). Along each side's ascending σ ladder the pooled
+    # ZNCC rises to one peak and then falls (on all 245 calls of the bench sets, demo sets 0-7
+    # and random sets 1000, 1003, 1007, 1011, 1013), so each ladder stops at its first fall
+    # and the rest, lower still, is not blurred (the large kernels, most of the cost): the
+    # left ladder here, the right on the helper.
     cands = [(0.0, 0.0)] + [c for s in sigmas[1:] for c in ((s, 0.0), (0.0, s))]
-    scores = [0.0] * len(cands)
+    s00 = pooled(0.0, 0.0)
 
-    def score(idx: Sequence[int]) -> None:
-        for i in idx:
-            scores[i] = pooled(*cands[i])
+    def ladder(side: int) -> list[float]:
+        out, prev = [], s00
+        for s in sigmas[1:]:
+            v = pooled(s, 0.0) if side == 0 else pooled(0.0, s)
+            out.append(v)
+            if v < prev:
+                break
+            prev = v
+        return out + [-np.inf] * (len(sigmas) - 1 - len(out))
 
-    run_split(score, range(len(cands)), min_items=4)
+    right = background(ladder, 1)
+    left_scores = ladder(0)
+    scores = [s00] + [v for pair in zip(left_scores, right.result(), strict=True) for v in pair]
     best = (scores[0], 0.0, 0.0)
     for i in range(1, len(cands), 2):
         best = max(best, (scores[i], *cands[i]), (scores[i + 1], *cands[i + 1]))

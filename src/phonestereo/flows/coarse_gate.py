@@ -18,6 +18,7 @@ import numpy as np
 from phonestereo.flows.coarse import (
     CoarsePeak,
     PeakContrast,
+    TileMaps,
     coarse_search,
     peak_contrast,
     rescale_tele,
@@ -29,10 +30,12 @@ Box = tuple[int, int, int, int]
 
 
 def coarse_verdict(
-    lw: Any, rt: Any, cbox: tuple[int, int, int, int], cp: CoarsePeak, cfg: RoiConfig
+    lw: Any, rt: Any, cbox: tuple[int, int, int, int], cp: CoarsePeak, cfg: RoiConfig,
+    maps: TileMaps | None = None,
 ) -> tuple[str, PeakContrast | None]:
     """Why the coarse peak of one box cannot be used ("" when it can), and the tile contrast
-    of its two peaks when it was computed."""
+    of its two peaks when it was computed (``maps``: the tiles' maps of a wider search about
+    the first peak, :func:`~phonestereo.flows.coarse.peak_contrast`'s ``reuse``)."""
     if not np.isfinite(cp.d) or cp.peak < cfg.coarse_min_zncc:
         return (
             f"the ROI does not correlate with the tele (ZNCC {cp.peak:.2f} < "
@@ -59,7 +62,7 @@ def coarse_verdict(
         return "", None
     # A periodic texture's alias peak is near the true one over the whole box by chance: the
     # first must beat it tile by tile (coarse.peak_contrast), not only in the sum.
-    pc = peak_contrast(lw, rt, cbox, (cp.d, cp.e), (cp.d2, cp.e2))
+    pc = peak_contrast(lw, rt, cbox, (cp.d, cp.e), (cp.d2, cp.e2), reuse=maps)
     if not pc.t >= cfg.min_peak_t:
         return (
             f"ambiguous disparity: the correlation peaks at {cp.d:.1f} px and {cp.d2:.0f} px "
@@ -93,15 +96,16 @@ class CoarseChoice:
 def _first_usable(
     lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig,
     first: CoarsePeak | None = None,
+    maps: TileMaps | None = None,
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
     """The first box whose coarse peak can be used (``first``: the first box's peak on this
-    very pair, already searched)."""
+    very pair, already searched; ``maps``: its tiles' maps about that peak)."""
     for i, cbox in enumerate(boxes):
         if i == 0 and first is not None:
             cp = first
         else:
             cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
-        why, pc = coarse_verdict(lw, rt, cbox, cp, cfg)
+        why, pc = coarse_verdict(lw, rt, cbox, cp, cfg, maps if i == 0 else None)
         if not why:
             break
     return cbox, cp, pc, why
@@ -134,10 +138,11 @@ def coarse_peak(
     b0 = boxes[0]
     tz, s = float("nan"), float("nan")
     p0: CoarsePeak | None = None
+    maps: list[TileMaps] = []  # the tiles' ±8 px maps about p0: the tile test's first peak
     if center is not None:
         p0 = coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
         if np.isfinite(p0.d):
-            s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1])
+            s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1], keep=maps)
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
     prescale = tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px
     why_s = ""
@@ -147,7 +152,7 @@ def coarse_peak(
         if not why:
             return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
         why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
-    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0)
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
     if why_s:
