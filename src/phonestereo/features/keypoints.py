@@ -48,16 +48,9 @@ def dog_noise_gain(sigma: float, k: float) -> float:
 
 
 def _select(
-    xs: NDArray[np.intp],
-    ys: NDArray[np.intp],
-    resp: F64,
-    max_keypoints: int,
-    cell: int,
-    priority: bool = False,
+    xs: NDArray[np.intp], ys: NDArray[np.intp], resp: F64, max_keypoints: int, cell: int
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], F64]:
-    """At most ``max_keypoints``: the best of each cell × cell box go first. Returned strongest
-    first, or (``priority``) in the order they were picked: the cells' best, strongest first,
-    then the rest, strongest first."""
+    """Strongest first, at most ``max_keypoints``: the best of each cell × cell box go first."""
     if len(resp) > 4 * max_keypoints:  # only the strongest can be picked
         top = np.argpartition(-resp, 4 * max_keypoints)[: 4 * max_keypoints]
         xs, ys, resp = xs[top], ys[top], resp[top]
@@ -70,8 +63,7 @@ def _select(
     rank = np.ones(len(xs), bool)
     rank[first] = False
     pick = np.concatenate([np.sort(first), np.flatnonzero(rank)])[:max_keypoints]
-    if not priority:
-        pick = pick[np.argsort(-resp[pick], kind="stable")]
+    pick = pick[np.argsort(-resp[pick], kind="stable")]
     return xs[pick], ys[pick], resp[pick]
 
 
@@ -99,7 +91,6 @@ def detect_dog(
     edge_ratio: float = 10.0,
     max_keypoints: int = 2000,
     cell: int = 8,
-    priority: bool = False,
 ) -> Keypoints:
     """DoG extrema with Hessian rejection of edge-like and weak responses.
 
@@ -120,11 +111,6 @@ def detect_dog(
         Cap on the count; the strongest of every ``cell``² box is kept first, then the rest.
     cell : int
         Box size for spreading the keypoints, px.
-    priority : bool
-        Return them in the order they are picked (the strongest of every cell, strongest
-        first, then the rest, strongest first) instead of strongest first: the first n of
-        ``max_keypoints`` = N > n are then the n that ``max_keypoints`` = n picks (when at
-        least n cells hold one).
 
     Returns
     -------
@@ -181,7 +167,7 @@ def detect_dog(
     else:
         ok = _hessian_ok(dog, xs, ys, edge_ratio)
         xs, ys, resp = xs[ok], ys[ok], resp[ok]
-    xs, ys, resp = _select(xs + ax, ys + ay, resp, max_keypoints, cell, priority)
+    xs, ys, resp = _select(xs + ax, ys + ay, resp, max_keypoints, cell)
     return Keypoints(np.stack([xs, ys], axis=1).astype(np.float64), resp)
 
 

@@ -22,13 +22,6 @@ class MatchConfig:
     detector: str = "dog"
     #: Keypoints searched (strongest first, spread over 8 × 8 px cells).
     max_keypoints: int = 2000
-    #: ``search_budget``, ``max_searched``: windows that fail the NCC search free their place for
-    #: the next keypoint candidates (DoG only, :mod:`~.search_budget`) until ``search_budget`` ×
-    #: ``max_keypoints`` windows passed, at most ``max_searched`` × ``max_keypoints`` searched
-    #: (0: off). EXPERIMENT.
-    search_budget: float = 0.0
-    #: See ``search_budget`` above.
-    max_searched: float = 4.0
     #: ``dog_sigma``, ``dog_k``, ``contrast``, ``edge_ratio``: DoG scales (px), minimum |DoG| in
     #: units of its noise σ, Lowe's edge ratio.
     dog_sigma: float = 1.0

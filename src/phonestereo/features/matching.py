@@ -58,7 +58,6 @@ from phonestereo.features.misfit import (
     residual_correlation,
 )
 from phonestereo.features.search import SearchResult, ncc_search
-from phonestereo.features.search_budget import refill_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients
 
 F32 = NDArray[np.float32]
@@ -154,7 +153,7 @@ def match_rectified(
         min(rx + rw, w - guard) - ox,
         min(ry + rh, h - guard) - oy,
     )
-    xy, resp = _keypoints(lc, box, noise_l, cfg)
+    xy = _keypoints(lc, box, noise_l, cfg)
     noise = (noise_l, noise_l if given is not None else right_prep.result()[0])
     counts = {"keypoints": len(xy)}
     if not len(xy):
@@ -162,31 +161,19 @@ def match_rectified(
         if box[2] <= box[0] or box[3] <= box[1]:
             why = f"no keypoints: the ROI is within {guard} px of the border (window + band)"
         return _empty(counts, noise, roi_t, t0, why)
-    refill = cfg.detector == "dog" and cfg.search_budget > 0
-
-    def search(sel: NDArray[np.int64]) -> SearchResult:
-        return ncc_search(
-            lc, rc, xy[sel], radius=r, min_d=dmin, max_d=dmax, row_tolerance=ty,
-            lr_tolerance=cfg.lr_tolerance, lr_min_score=cfg.min_score if cfg.lr_check else np.inf,
-            lr_uniqueness=cfg.uniqueness,
-        )
-
-    if refill:  # windows that fail the search free their place for the next candidates
-        searched, s, passed = refill_search(
-            search, lambda res: _search_tests(res, cfg, {}), len(xy),
-            first=cfg.max_keypoints, budget=round(cfg.search_budget * cfg.max_keypoints),
-            limit=round(cfg.max_searched * cfg.max_keypoints),
-        )
-        counts["keypoints"] = min(len(xy), cfg.max_keypoints)
-        counts["refilled"] = len(searched) - counts["keypoints"]
-        xy, resp = xy[searched], resp[searched]
-        _search_tests(s, cfg, counts)
-        order = np.argsort(-resp, kind="stable")  # strongest first, as without refilling
-        idx = order[passed[order]]
-        counts["left_right"] = len(idx)
-    else:
-        s = search(np.arange(len(xy)))
-        idx = np.flatnonzero(_search_tests(s, cfg, counts))
+    s = ncc_search(
+        lc,
+        rc,
+        xy,
+        radius=r,
+        min_d=dmin,
+        max_d=dmax,
+        row_tolerance=ty,
+        lr_tolerance=cfg.lr_tolerance,
+        lr_min_score=cfg.min_score if cfg.lr_check else np.inf,
+        lr_uniqueness=cfg.uniqueness,
+    )
+    idx = np.flatnonzero(_search_tests(s, cfg, counts))
     if not len(idx):
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
     added, shift_noise, noise_in = (0.0, 0.0), noise, noise
@@ -284,16 +271,12 @@ def _right_preparation(right: F32, with_noise: bool) -> tuple[float, F32]:
 
 def _keypoints(
     image: NDArray[np.float32], box: tuple[int, ...], noise: float, cfg: MatchConfig
-) -> tuple[NDArray[np.int64], F64]:
-    """Integer keypoints (N, 2) inside ``box`` = (x0, y0, x1, y1) of the working crop and their
-    responses; DoG with ``search_budget``: up to ``max_searched`` × ``max_keypoints``
-    candidates, in the detector's priority order (the first ``max_keypoints`` are the default)."""
+) -> NDArray[np.int64]:
+    """Integer keypoints (N, 2) inside ``box`` = (x0, y0, x1, y1) of the working crop."""
     x0, y0, x1, y1 = box
     if cfg.detector == "sift":
         kp = detect_sift(image, mask_box=(x0, y0, x1, y1), max_keypoints=cfg.max_keypoints)
     else:
-        refill = cfg.search_budget > 0
-        cand = round(cfg.max_searched * cfg.max_keypoints) if refill else cfg.max_keypoints
         kp = detect_dog(
             image,
             mask_box=(x0, y0, x1, y1),
@@ -301,10 +284,9 @@ def _keypoints(
             k=cfg.dog_k,
             threshold=max(cfg.contrast * dog_noise_gain(cfg.dog_sigma, cfg.dog_k) * noise, 0.2),
             edge_ratio=cfg.edge_ratio,
-            max_keypoints=cand,
-            priority=refill,
+            max_keypoints=cfg.max_keypoints,
         )
-    return kp.xy.astype(np.int64), kp.response
+    return kp.xy.astype(np.int64)
 
 
 def _search_tests(s: SearchResult, cfg: MatchConfig, counts: dict[str, int]) -> Mask:
