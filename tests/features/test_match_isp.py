@@ -127,6 +127,30 @@ def test_sigma_honest_on_isp_renders(setting: str, slant: float) -> None:
     assert 0.58 <= out["within_1_sigma"] <= 0.78, out
 
 
+# The phone pairs' left→right / right→left statistic (tests/_support/match_phone.py) on the same
+# ISP renders, where σ_d is honest against the truth (the test above). LR and RL fit the same
+# pixels, so their errors against the truth correlate (measured 0.97–0.99) and d_LR − d_RL keeps
+# only the small direction-dependent part: RMS z measured 0.08–0.17 (mild / default / strong,
+# fronto-parallel / slanted, seed 0), while |d − d_true| / σ_d has an RMS of 0.87–1.06. It reads
+# 0.28–0.29 at JPEG q70 / q60 too, where σ_d is too small (within σ 0.38–0.43): the statistic
+# does not see σ_d's honesty either way. So an honest σ_d reads far below the acceptance's lower
+# bound 0.8, and the phone pairs' 0.45–1.00 says that their direction-dependent error is 0.45–1.0
+# σ_d (the real pairs carry an error the renders do not: Middlebury's clean pairs read 1.0–1.27),
+# not that σ_d is too large
+@pytest.mark.parametrize(
+    ("setting", "slant"), [(s, t) for s in isp.ISP_SETTINGS for t in (0.0, 0.5)]
+)
+def test_lr_rl_statistic_reads_low_for_honest_sigma(setting: str, slant: float) -> None:
+    out = isp.isp_honesty(setting, (0.0, slant, 0.0))
+    assert 0.58 <= out["within_1_sigma"] <= 0.78, out  # σ_d honest here (68 ± 10 %)
+    assert out["lr_paired"] > 300, out
+    # the two directions share their error: 0.9 is far below what is measured (0.97–0.99) and
+    # far above independent errors (0)
+    assert out["lr_error_corr"] >= 0.9, out
+    # measured 0.08–0.17: 0.35 leaves twice the largest, and is still under half of 0.8
+    assert out["lr_rms_z"] <= 0.35, out
+
+
 @pytest.fixture(scope="module")
 def phone_rows() -> list[dict]:
     if not phone.DATA.exists():
@@ -159,7 +183,9 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
 # LR and RL fit the same pixels, so the misfit both see is common and cancels in d_LR − d_RL:
 # on Middlebury JPEG q85 the same statistic reads 0.58–0.83 while only 26–50 % of the matches
 # are within σ_d of the ground truth (σ_d too small, not too large); on the clean pairs it reads
-# 1.0–1.27. Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
+# 1.0–1.27; on the ISP renders, where σ_d is honest, 0.08–0.17
+# (test_lr_rl_statistic_reads_low_for_honest_sigma: the two directions' errors correlate
+# 0.97–0.99). Below 0.8 on phone pairs is therefore not an over-stated σ_d; the statistic cannot
 # show honesty on ISP-processed pairs, and the acceptance's lower bound is not met (7 of 16
 # pairs below 0.8: 0.45–0.79; 13 of 16 with the 15 × 15 fit)
 @pytest.mark.xfail(strict=True, reason="RMS z 0.45–1.00 per pair: common ISP misfit cancels")
