@@ -45,7 +45,10 @@ needs_data = pytest.mark.skipif(
 # motorcycle clean 0.0746), uniqueness 0.95 (Piano 468 of 771, 61 %), NCC on both images smoothed by
 # 0.5 / 1 px (the score test recovers, uniqueness loses them; Adirondack clean 883 → 855 / 776), a
 # symmetric prefilter before the fit (no gain in convergence), min_score 0.7 (Adirondack denoised
-# 440)
+# 440); the keypoints ranked by the right image's texture in the search band (47 % / 60 %:
+# Adirondack / Piano), a search budget refilled by the next candidates when windows fail the NCC
+# tests (49 % / 60 % at 1000 windows; 62 % / 59 % at 1200, Piano q70 then over its limit), and
+# NL-means on the left image too (60 % / 63 %; docs/matching.md)
 MISSES = {
     ("Adirondack", "denoised"): "keeps 47 % (415 of 883), median 0.0343 px",
     ("Piano", "denoised"): "keeps 60 % (398 of 663), median 0.0738 px",
