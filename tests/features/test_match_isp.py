@@ -47,9 +47,10 @@ needs_data = pytest.mark.skipif(
 # 0.5 / 1 px (the score test recovers, uniqueness loses them; Adirondack clean 883 → 855 / 776), a
 # symmetric prefilter before the fit (no gain in convergence), min_score 0.7 (Adirondack denoised
 # 440); the keypoints ranked by the right image's texture in the search band (47 % / 60 %:
-# Adirondack / Piano), a search budget refilled by the next candidates when windows fail the NCC
-# tests (49 % / 60 % at 1000 windows; 62 % / 59 % at 1200, Piano q70 then over its limit), and
-# NL-means on the left image too (60 % / 63 %; docs/matching.md)
+# Adirondack / Piano), and NL-means on the left image too (60 % / 63 %; docs/matching.md). The
+# search's refill of windows that fail it (features/search_budget.py, adopted for the phone
+# pairs) brings them only to 49 % / 60 % at its budget of 1000 windows (62 % / 59 % at 1200, Piano
+# q70 then over its limit): the refilled candidates are weak and the denoiser spoiled them first
 MISSES = {
     ("Adirondack", "denoised"): "keeps 49 % (429 of 883), median 0.0376 px",
     ("Piano", "denoised"): "keeps 60 % (417 of 699), median 0.0748 px",
