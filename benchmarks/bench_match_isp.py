@@ -29,13 +29,16 @@ def main() -> int:
                 f" {out['within_1_sigma']:8.2f}",
                 flush=True,
             )
-    print("\nISP setting  tilt   matches  median|e|px  median σ_d  within σ")
+    # LR/RL z: the phone pairs' left→right vs right→left statistic on the same renders
+    # (bench_match_phone.py), and the correlation of the two directions' errors against the truth
+    print("\nISP setting  tilt   matches  median|e|px  median σ_d  within σ  LR/RL z  err corr")
     for setting in ISP_SETTINGS:
         for tilt in ((0.0, 0.0, 0.0), (0.0, 0.5, 0.0)):
             out = isp_honesty(setting, tilt)
             print(
                 f"{setting:11s} {tilt[1]:5.2f} {out['matches']:8d} {out['median_abs_err_px']:11.4f}"
-                f" {out['median_sigma_d_px']:11.4f} {out['within_1_sigma']:9.2f}",
+                f" {out['median_sigma_d_px']:11.4f} {out['within_1_sigma']:9.2f}"
+                f" {out['lr_rms_z']:8.2f} {out['lr_error_corr']:9.2f}",
                 flush=True,
             )
     return 0

@@ -16,6 +16,7 @@ Three measurements, each a function the tests call (tests/features/test_match_is
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import cv2
@@ -172,13 +173,24 @@ def bench_scene(
     return scene, cam, poses, f_px * baseline_m / depth
 
 
+@lru_cache(maxsize=16)
 def isp_honesty(setting: str, tilt: tuple[float, float, float], seed: int = 0) -> dict[str, Any]:
-    """Matches, median |d − d_true| and the fraction within σ_d on one ISP-rendered plane."""
+    """Matches, median |d − d_true|, the fraction within σ_d on one ISP-rendered plane, and the
+    left→right / right→left statistic of the phone pairs (``match_phone.both_directions``) on
+    the same pair: its RMS z and the correlation of the two directions' errors against the truth.
+    """
+    from _support.match_phone import both_directions
+
     left, right, d_true = isp_pair([(16.3, tilt, (0.0, 0.0))], ISP_SETTINGS[setting], seed=seed)
-    res = match_rectified(left, right, max_disparity=32)
+    res, rl, i, j = both_directions(
+        np.asarray(left, np.float64), np.asarray(right, np.float64), max_disparity=32
+    )
     xi = np.rint(res.xy).astype(int)
-    signed = res.d - d_true[xi[:, 1], xi[:, 0]]
+    truth = d_true[xi[:, 1], xi[:, 0]]
+    signed = res.d - truth
     err = np.abs(signed)
+    z = (res.d[i] - rl.d[j]) / np.hypot(res.sigma_d[i], rl.sigma_d[j])
+    corr = np.corrcoef(signed[i], rl.d[j] - truth[i])[0, 1] if len(i) > 2 else np.nan
     return {
         "setting": setting,
         "tilt": tilt,
@@ -187,4 +199,7 @@ def isp_honesty(setting: str, tilt: tuple[float, float, float], seed: int = 0) -
         "median_abs_err_px": float(np.median(err)) if len(err) else float("nan"),
         "within_1_sigma": float(np.mean(err <= res.sigma_d)) if len(err) else float("nan"),
         "median_sigma_d_px": float(np.median(res.sigma_d)) if len(err) else float("nan"),
+        "lr_paired": len(i),
+        "lr_rms_z": float(np.sqrt(np.mean(z**2))) if len(z) else float("nan"),
+        "lr_error_corr": float(corr),
     }

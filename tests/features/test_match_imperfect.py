@@ -23,12 +23,13 @@ def aligned() -> dict[str, dict]:
 
 
 # measured (matches, within 0.5 px, median px): aligned Adirondack 883, 0.978, 0.0188; Piano 663,
-# 0.964, 0.0678. Misaligned: Adirondack 757–876 matches, 0.971–0.978, 0.97–1.08× the aligned
-# median; Piano 574–689, 0.963–0.973, 0.92–1.09×. The matcher's ±3 row search and its fitted e
-# take the row offset (dy = 1 px alone: 1.00×); the roll's disparity gradient along y is the
-# fitted slant. With one image resampled bilinearly instead (order 1) the medians read 1.9–2.0×
-# (Adirondack) and 1.45× (Piano): the interpolation's own bias at fractional offsets, not the
-# matcher's (cubic B-spline: 1.07–1.18×). OpenCV's remap of the 0.1° roll alone: INTER_LINEAR
+# 0.964, 0.0678 (699, 0.966, 0.0676 since the search refills, features/search_budget.py; the
+# misaligned figures below are from before it). Misaligned: Adirondack 757–876 matches, 0.971–0.978,
+# 0.97–1.08× the aligned median; Piano 574–689, 0.963–0.973, 0.92–1.09×. The matcher's ±3 row search
+# and its fitted e take the row offset (dy = 1 px alone: 1.00×); the roll's disparity gradient along
+# y is the fitted slant. With one image resampled bilinearly instead (order 1) the medians read
+# 1.9–2.0× (Adirondack) and 1.45× (Piano): the interpolation's own bias at fractional offsets, not
+# the matcher's (cubic B-spline: 1.07–1.18×). OpenCV's remap of the 0.1° roll alone: INTER_LINEAR
 # 1.95× (signed +0.028 px against +0.001 aligned), INTER_CUBIC 1.16×, INTER_LANCZOS4 1.05×
 # (Adirondack): the product's rectification remaps bilinearly by default
 @needs_data

@@ -26,7 +26,7 @@ DETECTORS = ("dog", "sift")
 
 @dataclass(frozen=True, eq=False)
 class Keypoints:
-    """Integer-pixel keypoints, strongest first."""
+    """Integer-pixel keypoints, strongest first (or in :func:`detect_dog`'s priority order)."""
 
     #: ndarray, shape (N, 2), float64. (x, y) pixels (integers stored as float).
     xy: F64
@@ -48,9 +48,16 @@ def dog_noise_gain(sigma: float, k: float) -> float:
 
 
 def _select(
-    xs: NDArray[np.intp], ys: NDArray[np.intp], resp: F64, max_keypoints: int, cell: int
+    xs: NDArray[np.intp],
+    ys: NDArray[np.intp],
+    resp: F64,
+    max_keypoints: int,
+    cell: int,
+    priority: bool = False,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], F64]:
-    """Strongest first, at most ``max_keypoints``: the best of each cell × cell box go first."""
+    """At most ``max_keypoints``: the best of each cell × cell box go first. Returned strongest
+    first, or (``priority``) in the order they were picked: the cells' best, strongest first,
+    then the rest, strongest first."""
     if len(resp) > 4 * max_keypoints:  # only the strongest can be picked
         top = np.argpartition(-resp, 4 * max_keypoints)[: 4 * max_keypoints]
         xs, ys, resp = xs[top], ys[top], resp[top]
@@ -63,7 +70,8 @@ def _select(
     rank = np.ones(len(xs), bool)
     rank[first] = False
     pick = np.concatenate([np.sort(first), np.flatnonzero(rank)])[:max_keypoints]
-    pick = pick[np.argsort(-resp[pick], kind="stable")]
+    if not priority:
+        pick = pick[np.argsort(-resp[pick], kind="stable")]
     return xs[pick], ys[pick], resp[pick]
 
 
@@ -91,6 +99,7 @@ def detect_dog(
     edge_ratio: float = 10.0,
     max_keypoints: int = 2000,
     cell: int = 8,
+    priority: bool = False,
 ) -> Keypoints:
     """DoG extrema with Hessian rejection of edge-like and weak responses.
 
@@ -111,6 +120,11 @@ def detect_dog(
         Cap on the count; the strongest of every ``cell``² box is kept first, then the rest.
     cell : int
         Box size for spreading the keypoints, px.
+    priority : bool
+        Return them in the order they are picked (the strongest of every cell, strongest
+        first, then the rest, strongest first) instead of strongest first. The first n of
+        ``max_keypoints`` = N > n are the n that ``max_keypoints`` = n picks when the 4n
+        strongest candidates already hold n cells; otherwise they are spread over more cells.
 
     Returns
     -------
@@ -167,7 +181,7 @@ def detect_dog(
     else:
         ok = _hessian_ok(dog, xs, ys, edge_ratio)
         xs, ys, resp = xs[ok], ys[ok], resp[ok]
-    xs, ys, resp = _select(xs + ax, ys + ay, resp, max_keypoints, cell)
+    xs, ys, resp = _select(xs + ax, ys + ay, resp, max_keypoints, cell, priority)
     return Keypoints(np.stack([xs, ys], axis=1).astype(np.float64), resp)
 
 

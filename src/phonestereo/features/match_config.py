@@ -20,7 +20,9 @@ class MatchConfig:
 
     #: {"dog", "sift"}.
     detector: str = "dog"
-    #: Keypoints searched (strongest first, spread over 8 × 8 px cells).
+    #: Keypoints searched (strongest first, spread over 8 × 8 px cells). DoG: while fewer than half
+    #: of them pass the NCC search tests, the next candidates are searched in place of those that
+    #: failed, up to 4 × as many (:mod:`~.search_budget`).
     max_keypoints: int = 2000
     #: ``dog_sigma``, ``dog_k``, ``contrast``, ``edge_ratio``: DoG scales (px), minimum |DoG| in
     #: units of its noise σ, Lowe's edge ratio.
@@ -264,6 +266,9 @@ class MatchResult:
     #: Window half size of the sub-pixel fit, px: ``MatchConfig.radius``, or ``wide_radius`` when
     #: the pair's misfit floor said it is compression-limited (0 when nothing was fitted).
     radius: int = 0
+    #: Keypoints searched beyond ``max_keypoints`` in place of windows that failed the NCC
+    #: search (:mod:`~.search_budget`; counted in ``counts["keypoints"]``).
+    refilled: int = 0
 
     def __post_init__(self) -> None:
         for name in ("xy", "d", "e", "sigma_d", "sigma_e", "score", "zncc"):
@@ -289,6 +294,7 @@ class MatchResult:
             "blur_added": [round(s, 3) for s in self.blur_added],
             "cfa_filtered": self.cfa_filtered,
             "radius": self.radius,
+            "refilled": self.refilled,
             "roi": list(self.roi),
             "reason": self.reason,
         }

@@ -58,6 +58,7 @@ from phonestereo.features.misfit import (
     residual_correlation,
 )
 from phonestereo.features.search import SearchResult, ncc_search
+from phonestereo.features.search_budget import REFILL_BUDGET, REFILL_LIMIT, refill_search
 from phonestereo.features.subpixel import PREFILTER_MARGIN, bspline_coefficients
 
 F32 = NDArray[np.float32]
@@ -153,7 +154,7 @@ def match_rectified(
         min(rx + rw, w - guard) - ox,
         min(ry + rh, h - guard) - oy,
     )
-    xy = _keypoints(lc, box, noise_l, cfg)
+    xy, resp = _keypoints(lc, box, noise_l, cfg)
     noise = (noise_l, noise_l if given is not None else right_prep.result()[0])
     counts = {"keypoints": len(xy)}
     if not len(xy):
@@ -161,19 +162,39 @@ def match_rectified(
         if box[2] <= box[0] or box[3] <= box[1]:
             why = f"no keypoints: the ROI is within {guard} px of the border (window + band)"
         return _empty(counts, noise, roi_t, t0, why)
-    s = ncc_search(
-        lc,
-        rc,
-        xy,
-        radius=r,
-        min_d=dmin,
-        max_d=dmax,
-        row_tolerance=ty,
-        lr_tolerance=cfg.lr_tolerance,
-        lr_min_score=cfg.min_score if cfg.lr_check else np.inf,
-        lr_uniqueness=cfg.uniqueness,
-    )
-    idx = np.flatnonzero(_search_tests(s, cfg, counts))
+    def search(sel: NDArray[np.int64]) -> SearchResult:
+        return ncc_search(
+            lc,
+            rc,
+            xy[sel],
+            radius=r,
+            min_d=dmin,
+            max_d=dmax,
+            row_tolerance=ty,
+            lr_tolerance=cfg.lr_tolerance,
+            lr_min_score=cfg.min_score if cfg.lr_check else np.inf,
+            lr_uniqueness=cfg.uniqueness,
+        )
+
+    if cfg.detector == "dog":  # windows that fail the search free their place for the next
+        searched, s, passed = refill_search(
+            search,
+            lambda res: _search_tests(res, cfg, {}),
+            len(xy),
+            first=cfg.max_keypoints,
+            budget=round(REFILL_BUDGET * cfg.max_keypoints),
+            limit=round(REFILL_LIMIT * cfg.max_keypoints),
+        )
+        counts["keypoints"] = len(searched)  # the first max_keypoints and the refills
+        refilled = max(len(searched) - cfg.max_keypoints, 0)
+        xy, resp = xy[searched], resp[searched]
+        _search_tests(s, cfg, counts)
+        order = np.argsort(-resp, kind="stable")  # strongest first, as without refilling
+        idx = order[passed[order]]
+        counts["left_right"] = len(idx)
+    else:
+        s, refilled = search(np.arange(len(xy))), 0
+        idx = np.flatnonzero(_search_tests(s, cfg, counts))
     if not len(idx):
         return _empty(counts, noise, roi_t, t0, "no keypoint passed the NCC search tests")
     added, shift_noise, noise_in = (0.0, 0.0), noise, noise
@@ -260,6 +281,7 @@ def match_rectified(
         blur_added=added,
         cfa_filtered=bool(cfa),
         radius=r,
+        refilled=refilled,
     )
 
 
@@ -271,8 +293,11 @@ def _right_preparation(right: F32, with_noise: bool) -> tuple[float, F32]:
 
 def _keypoints(
     image: NDArray[np.float32], box: tuple[int, ...], noise: float, cfg: MatchConfig
-) -> NDArray[np.int64]:
-    """Integer keypoints (N, 2) inside ``box`` = (x0, y0, x1, y1) of the working crop."""
+) -> tuple[NDArray[np.int64], F64]:
+    """Integer keypoints (N, 2) inside ``box`` = (x0, y0, x1, y1) of the working crop and their
+    responses. DoG: up to :data:`~.search_budget.REFILL_LIMIT` × ``max_keypoints`` candidates in
+    the detector's priority order, whose first ``max_keypoints`` are those it picks for that cap
+    (the search refills from the rest, :mod:`~.search_budget`)."""
     x0, y0, x1, y1 = box
     if cfg.detector == "sift":
         kp = detect_sift(image, mask_box=(x0, y0, x1, y1), max_keypoints=cfg.max_keypoints)
@@ -284,9 +309,10 @@ def _keypoints(
             k=cfg.dog_k,
             threshold=max(cfg.contrast * dog_noise_gain(cfg.dog_sigma, cfg.dog_k) * noise, 0.2),
             edge_ratio=cfg.edge_ratio,
-            max_keypoints=cfg.max_keypoints,
+            max_keypoints=round(REFILL_LIMIT * cfg.max_keypoints),
+            priority=True,
         )
-    return kp.xy.astype(np.int64)
+    return kp.xy.astype(np.int64), kp.response
 
 
 def _search_tests(s: SearchResult, cfg: MatchConfig, counts: dict[str, int]) -> Mask:
