@@ -124,7 +124,9 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
         ),
         "max_keypoints": (
             "count",
-            "Keypoints searched (strongest first, spread over 8×8 px cells).",
+            "Keypoints searched (strongest first, spread over 8×8 px cells); while fewer "
+            "than half pass the search, the next candidates take the places of those that "
+            "failed, up to 4× as many in all (features/search_budget.py).",
             "Flow: 450 (median 0.37-0.58 %, ~53 ms per capture vs "
             "~130 ms at 1200); matcher alone: 2000.",
         ),
