@@ -245,7 +245,8 @@ class Corrector:
             return 0.0
         m = np.asarray(means)
         between = (1.4826 * float(np.median(np.abs(m - np.median(m))))) ** 2
-        noise = float(np.median(within)) * float(np.mean(1.0 / np.asarray(counts))) if within else 0.0
+        noise = (float(np.median(within)) * float(np.mean(1.0 / np.asarray(counts)))
+                 if within else 0.0)
         return float(np.sqrt(max(between - noise, 0.0)))
 
     def _extent(self, bucket: str) -> LearnedExtent:
