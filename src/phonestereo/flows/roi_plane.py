@@ -92,15 +92,14 @@ def _soft_l1(Aw: F64, bw: F64, p: F64, max_iter: int = 50) -> F64 | None:
     """
     c2 = _F_SCALE * _F_SCALE
 
-    def cost(q: F64) -> tuple[float, F64]:
+    def cost(q: F64) -> tuple[float, F64, F64]:
         r = Aw @ q - bw
         s = np.sqrt(1.0 + r * r / c2)
-        return float(np.sum(s - 1.0)), r / s  # cost / (2c²), and ρ'·r
+        return float(np.sum(s - 1.0)), r / s, s  # cost / (2c²), ρ'·r, and √(1 + (r/c)²)
 
-    f, g_r = cost(p)
+    f, g_r, s = cost(p)
     for _ in range(max_iter):
         g = Aw.T @ g_r
-        s = np.sqrt(1.0 + (Aw @ p - bw) ** 2 / c2)
         H = (Aw * (1.0 / s**3)[:, None]).T @ Aw
         try:
             step = np.linalg.solve(H, g)
@@ -112,13 +111,13 @@ def _soft_l1(Aw: F64, bw: F64, p: F64, max_iter: int = 50) -> F64 | None:
             return p - step  # quadratic convergence: the next step would be rounding noise
         t, slope = 1.0, float(g @ step) / c2
         for _ in range(30):
-            f_new, g_new = cost(p - t * step)
+            f_new, g_new, s_new = cost(p - t * step)
             if f_new <= f - 1e-4 * t * slope:
                 break
             t *= 0.5
         else:
             return p if slope <= 1e-20 * (1.0 + f) else None
-        p, f, g_r = p - t * step, f_new, g_new
+        p, f, g_r, s = p - t * step, f_new, g_new, s_new
     return None
 
 
