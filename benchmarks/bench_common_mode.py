@@ -15,6 +15,10 @@ mode. Flags (combine them, ``-`` for none):
 - ``Q``: the flows' ``radial_residual`` knob on (thesis §3.2's non-disparity-axis fix,
   :mod:`~phonestereo.fixes.radial_residual`); with F or C the oracle disparities get its
   correction too (the truth's rectified positions carry the lens residual it removes).
+  Without ``Q`` the knob is off, so ``Q`` alone (not ``-``) is the product's default flow,
+  which is what ``phonestereo evaluate`` reports.
+
+The verification captures' focus stacks are applied as ``evaluate`` applies them.
 
 Ground truth is read here only: this is a diagnosis, not the product. The monkeypatches are
 undone after each run.
@@ -116,14 +120,14 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
         corr = Corrector([o for c in lr.captures for o in c.observations], cfg,
                          radial_fits=[c.radial for c in lr.captures])
         err, z_score = [], []
-        for entry in cs.captures():
-            if entry.kind != "verification":
-                continue
+        ver = [c for c in cs.captures() if c.kind == "verification"]
+        focus = learning.stack_corrections(cfg, cs, ver, cal)  # as evaluate's apply_all does
+        for entry in ver:
             current["id"] = entry.id
             wide, tele = (read_gray(p) for p in cs.image_paths(entry.id))
-            r = application.run(
-                cfg, application.ApplicationInputs(cal, entry, wide, tele, corr, reference=ref)
-            )
+            r = application.run(cfg, application.ApplicationInputs(
+                cal, entry, wide, tele, corr, focus=focus.get(entry.id), reference=ref
+            ))
             z_true = gt.capture(entry.id).roi_depth_m
             if not r.ok or z_true is None:
                 continue
