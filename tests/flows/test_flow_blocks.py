@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from phonestereo.fixes.distortion import radial_geometry
 from phonestereo.fixes.focus import ScaleOffset
+from phonestereo.fixes.radial_residual import fit_capture_radial, pool_radial, radial_shift
 from phonestereo.flows import application
 from phonestereo.flows.coarse import coarse_disparity
 from phonestereo.flows.config import Corrector, FlowConfig
@@ -152,3 +154,25 @@ def test_coarse_box_stays_inside_a_rotated_narrow_tele() -> None:
     # and not needlessly small: ≥ 60 % of the largest square in the disc (side 283 px) that
     # fits the tele's 350 − 42 px wide view
     assert min(w, h) >= 0.6 * min(283, 308)
+
+
+def test_faces_carry_the_pooled_radial_fit_not_their_own() -> None:
+    # The application takes the pooled fit out of a ROI; a face whose own capture's fit took
+    # out another shift is re-referred to the pooled one, exactly (a re-referral, not a fit).
+    rng = np.random.default_rng(1)
+    q = rng.uniform(0.0, 1000.0, size=(400, 2))
+    r, u = radial_geometry(q, (500.0, 500.0))
+    fit = fit_capture_radial(q, u[:, 1] * 0.3 * (r / 500.0) ** 2, (500.0, 500.0))
+    pooled = pool_radial([fit, fit])
+    assert pooled is not None
+    own = [0.2, -0.15, float("nan")]  # the third: a store before schema 5 (not recorded)
+    obs = [Observation(x, 300.0, 10.0 - a if np.isfinite(a) else 10.0, 10.5, 1.8, "landscape",
+                       "", 600.0, None, f"c{i}", radial_px=a)
+           for i, (x, a) in enumerate(zip([900.0, 200.0, 700.0], own, strict=True))]
+    corr = Corrector(obs, FlowConfig(), radial_fits=[fit, fit])
+    want = 10.0 - radial_shift(pooled, [[900.0, 300.0], [200.0, 300.0]])[:, 0]
+    got = corr.observations["d_measured_px"]
+    assert np.allclose(got[:2], want, atol=1e-12) and got[2] == 10.0
+    # with the fix off nothing is re-referred
+    off = Corrector(obs, FlowConfig(radial_residual=False), radial_fits=[fit, fit])
+    assert np.allclose(off.observations["d_measured_px"][:2], [9.8, 10.15], atol=1e-12)

@@ -240,8 +240,8 @@ def learn_face_capture(
             stages["radial_residual"] = None if radial is None else radial.to_dict()
             if radial is not None:
                 dx = radial_shift(radial, np.array([[o.x_px, o.y_px] for o in obs]))[:, 0]
-                obs = tuple(
-                    replace(o, d_measured_px=o.d_measured_px - float(v))
+                obs = tuple(  # radial_px: the correction re-refers it to the pooled fit
+                    replace(o, d_measured_px=o.d_measured_px - float(v), radial_px=float(v))
                     for o, v in zip(obs, dx, strict=True)
                 )
     if config.orientation_buckets is False:

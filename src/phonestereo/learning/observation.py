@@ -47,6 +47,7 @@ NUMERIC_FIELDS = (
     "time_s",
     "temperature_c",
     "sigma_px",
+    "radial_px",
 )
 #: Text columns of an observation array.
 TEXT_FIELDS = ("orientation", "focus_group", "capture_id", "source")
@@ -64,6 +65,7 @@ FIELDS = (
     "capture_id",
     "source",
     "sigma_px",
+    "radial_px",
 )
 
 
@@ -103,6 +105,12 @@ class Observation:
     source: str = "face-chart"
     #: Standard deviation of the correction, pixels; NaN when unknown.
     sigma_px: float = field(default=math.nan)
+    #: The residual radial distortion's x part (thesis §3.2) the learning took out of
+    #: ``d_measured_px`` with its own capture's fit, pixels; NaN when none was taken out or it
+    #: was not recorded (stores before schema 5). The learned correction re-refers it to the
+    #: learning captures' pooled fit, the one the application takes out of a ROI
+    #: (:class:`~phonestereo.flows.config.Corrector`).
+    radial_px: float = field(default=math.nan)
 
     def __post_init__(self) -> None:
         for name in ("x_px", "y_px", "d_measured_px", "d_expected_px", "time_s"):
@@ -117,6 +125,10 @@ class Observation:
         if not (math.isnan(s) or (math.isfinite(s) and s >= 0)):
             raise InputError(f"observation sigma_px must be ≥ 0 or NaN (unknown), got {s}")
         object.__setattr__(self, "sigma_px", s)
+        rad = float(self.radial_px)
+        if math.isinf(rad):
+            raise InputError(f"observation radial_px must be finite or NaN (none), got {rad}")
+        object.__setattr__(self, "radial_px", rad)
         if self.focus_group is None:
             object.__setattr__(self, "focus_group", "")
         for name in TEXT_FIELDS:
