@@ -101,4 +101,33 @@ def correct_depth(
     return z_true
 
 
-__all__ = ["correct_depth", "focal_breathing_scale"]
+def focus_sigma_rel(focal_length_mm: float, focus_dioptre: float, sigma_dioptre: float) -> float:
+    """Relative σ of the breathing scale from a reported focus's σ (thin lens, module
+    docstring): d ln(f_w)/dD = f / (1 − f·D), so σ_rel = f·σ_D / (1 − f·D).
+
+    Parameters
+    ----------
+    focal_length_mm : float
+        Physical focal length of the wide, millimetres (> 0).
+    focus_dioptre : float
+        The reported focus, dioptres (≥ 0).
+    sigma_dioptre : float
+        Its σ, dioptres (≥ 0).
+
+    Examples
+    --------
+    A 5.8 mm wide reported at 0.5 D with 0.3 D of σ:
+
+    >>> round(focus_sigma_rel(5.8, 0.5, 0.3) * 100, 3)     # % of the depth
+    0.175
+    """
+    f = float(focal_length_mm) * 1e-3
+    if not (f > 0 and np.isfinite(f)) or not (sigma_dioptre >= 0) or not (focus_dioptre >= 0):
+        raise InputError(
+            f"focus_sigma_rel needs a focal length > 0 mm and a focus and σ ≥ 0 D, got "
+            f"{focal_length_mm}, {focus_dioptre}, {sigma_dioptre}"
+        )
+    return float(f * sigma_dioptre / (1.0 - f * focus_dioptre))
+
+
+__all__ = ["correct_depth", "focal_breathing_scale", "focus_sigma_rel"]

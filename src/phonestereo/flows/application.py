@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from phonestereo.fixes.breathing import correct_depth
+from phonestereo.fixes.breathing import correct_depth, focus_sigma_rel
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
@@ -194,11 +194,18 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         sigma_wt = float(m.wt.sigma_scale * abs(x_t - m.wt.center_px[0]))
     sigma_d = float(np.sqrt(sd_grid[k] ** 2 + sigma_wt**2 + corr_s[k] ** 2))
     sigma_z = depth * sigma_d / max(float(d_fix[k]), 1e-9)
+    sigma_focus = 0.0  # the wide's reported focus, as disparity
     cond = inputs.calibration.conditions
     if config.wide_breathing and cond.wide_focal_length_mm and cond.focus_distance_m:
         scale = correct_depth(depth, cond.wide_focal_length_mm, cond.focus_distance_m,
                               entry.focus_position) / depth
         depth, sigma_z, z_raw = depth * scale, sigma_z * scale, z_raw * scale
+        if entry.focus_position is not None and entry.focus_position >= 0:  # the report's σ
+            rel = focus_sigma_rel(cond.wide_focal_length_mm, entry.focus_position,
+                                  config.wide_focus_sigma_dioptre)
+            sigma_focus = rel * float(d_fix[k])
+            sigma_d = float(np.hypot(sigma_d, sigma_focus))
+            sigma_z = float(np.hypot(sigma_z, rel * depth))
         stages["wide_breathing"] = {
             "scale": round(scale, 6), "focal_length_mm": cond.wide_focal_length_mm,
             "calibration_focus_m": cond.focus_distance_m,
@@ -206,7 +213,8 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         }
     stages["sigma_px"] = {
         "matching": round(float(sd_grid[k]), 5), "wt_scale": round(sigma_wt, 5),
-        "correction": round(float(corr_s[k]), 5), "total": round(sigma_d, 5),
+        "correction": round(float(corr_s[k]), 5), "wide_focus": round(sigma_focus, 5),
+        "total": round(sigma_d, 5),
         **{f"correction_{n}": round(float(v[k]), 5) for n, v in parts.items()},
     }
     if not sigma_z <= config.max_relative_sigma * depth:

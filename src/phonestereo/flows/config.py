@@ -88,6 +88,10 @@ class FlowConfig:
     #: calibration and use (§3.5, :mod:`~phonestereo.fixes.breathing`; applied when the
     #: calibration gives the wide's physical focal length and its focus distance, else a no-op).
     wide_breathing: bool = True
+    #: σ of a reported wide focus position, dioptres: with ``wide_breathing`` a depth scaled by
+    #: the focal length at the *reported* focus carries f·σ_D/(1 − f·D) of relative σ
+    #: (:func:`~phonestereo.fixes.breathing.focus_sigma_rel`; 0 = trust the report).
+    wide_focus_sigma_dioptre: float = 0.3
     #: A fix (on by default, see ``heating_gate``): the residual radial distortion of the rectified
     #: pair (thesis §3.2's non-disparity-axis fix, :mod:`~phonestereo.fixes.radial_residual`),
     #: fitted to each face capture's whole-view matches and taken out of the faces' and, pooled,
@@ -156,6 +160,7 @@ APPLY_ONLY = (
     "focal_rel_sigma",
     "max_relative_sigma",
     "wide_breathing",
+    "wide_focus_sigma_dioptre",
 )
 
 ALL_BUCKETS = "all"

@@ -66,13 +66,12 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
     ),
     "focal_rel_sigma": (
         "relative",
-        "σ of the wide's focal length at the working focus: a systematic (common-mode) "
-        "part of the learned correction's σ (learning/extent.py).",
-        "0.25 %: what a store cannot see in its own scatter (the IPD ruler through the "
-        "factory wide model, the landmark detector's IPD bias, the wide-breathing fix's "
-        "focus input). With it the median ρ over the 28 bench sets, 0.36 %, matches the rms of "
-        "their measured common-mode errors, 0.36 % (0.4 % made it 0.48 %; "
-        "docs/module-random.md, session 13).",
+        "σ of the common scale a store cannot see in its own scatter: a systematic "
+        "(common-mode) part of the learned correction's σ (learning/extent.py).",
+        "0.1 %: the IPD ruler through the factory wide model and the landmark detector's IPD "
+        "bias. With it the 29 bench sets' mean errors over their ρ have an rms of 1.02 (0.25 % "
+        "made it 0.75), with the faces on the pooled radial fit (docs/module-random.md, "
+        "session 14). A reported wide focus's σ is per capture: wide_focus_sigma_dioptre.",
     ),
     "max_relative_sigma": (
         "relative",
@@ -104,6 +103,18 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "On: the learned correction cannot see this scale (the IPD ruler reads in the same "
         "pixels); the random periscopes read +0.3–1.3 % long without it (random-1005, 5.85 mm "
         "wide calibrated at 0.6 m: +1.26 % mean → +0.58 %).",
+    ),
+    "wide_focus_sigma_dioptre": (
+        "D",
+        "σ of the wide's reported focus position (the manifest's focus_position). With "
+        "wide_breathing on, a depth scaled by the focal length at the reported focus carries "
+        "f·σ_D/(1 − f·D) of relative σ (a 5.8 mm wide: 0.17 % at 0.3 D).",
+        "0.3 D: a report the thesis found unreliable (§3.5; Camera2's APPROXIMATE focus "
+        "calibration promises dioptres, not repeatability), the virtual module's report noise. "
+        "Without it the per-capture σ covered the scatter between two captures of one chart "
+        "only at rms z 2.1 over the 29 bench sets; with it 0.99 (docs/module-random.md, "
+        "session 14). Set it from your phone: the spread of the reported focus over repeated "
+        "autofocus on one target.",
     ),
     "radial_residual": (
         "bool",

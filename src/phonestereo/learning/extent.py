@@ -49,10 +49,13 @@ from scipy.spatial import cKDTree
 from phonestereo.learning.lookup import as_queries
 from phonestereo.learning.observation import as_observation_array, corrections_px
 
-#: Relative uncertainty of the wide's focal length at the working focus (see module docstring):
-#: with it the median ρ over the 28 bench sets (0.36 %) matches the measured rms of their
-#: common-mode errors (0.36 %); 0.4 % made it 0.48 % (docs/module-random.md, session 13).
-FOCAL_REL_SIGMA = 0.0025
+#: Relative uncertainty of the common scale a store cannot see in its own scatter (see module
+#: docstring): with it the 29 bench sets' common-mode errors (each set's mean error) over their
+#: ρ have an rms of 1.02 (0.25 % made it 0.75, 0 1.13), once the faces carry the pooled radial
+#: fit (docs/module-random.md, session 14; 0.25 % in session 13 matched the median ρ to the rms
+#: common mode of the time, 0.36 %). A reported wide focus's own σ is per capture, not in it
+#: (``FlowConfig.wide_focus_sigma_dioptre``).
+FOCAL_REL_SIGMA = 0.001
 
 _MAD = 1.4826
 
