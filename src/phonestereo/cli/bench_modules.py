@@ -16,6 +16,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar, _fail
+from phonestereo.cli.widgets import json_option
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
@@ -49,9 +50,7 @@ def bench_modules(
     retry_failed: Annotated[
         bool, typer.Option(help="Rerun modules whose earlier run failed.")
     ] = True,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the distribution as JSON.")
-    ] = False,
+    as_json: Annotated[bool, json_option("Print the distribution as JSON.")] = False,
 ) -> None:
     """Run the demo flow on random modules: one row per module, the distribution, a figure.
 

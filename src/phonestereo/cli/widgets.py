@@ -7,7 +7,7 @@ reads the same everywhere and one progress bar looks the same everywhere.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -22,8 +22,21 @@ from rich.progress import (
 )
 from rich.table import Table
 
+
+def json_option(help: str = "Print the summary as JSON.") -> Any:
+    """The ``--json`` flag with a command's own ``help``: print the result as JSON (for scripts)
+    instead of tables. Use as ``as_json: Annotated[bool, json_option("...")] = False``."""
+    return typer.Option("--json", help=help)
+
+
+def overlay_option(what: str) -> Any:
+    """The ``--overlay FILE`` option of a detector: write a PNG/JPEG with ``what`` drawn on
+    the image. Use as ``overlay: Annotated[Path | None, overlay_option("...")] = None``."""
+    return typer.Option("--overlay", help=f"Write a PNG/JPEG with the {what}.")
+
+
 #: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
-JSON_SUMMARY = Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+JSON_SUMMARY = Annotated[bool, json_option()]
 
 
 def error_exit(exc: Exception) -> typer.Exit:
