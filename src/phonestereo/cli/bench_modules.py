@@ -16,7 +16,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar, _fail
-from phonestereo.cli.widgets import json_option
+from phonestereo.cli.widgets import json_option, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
@@ -70,11 +70,10 @@ def bench_modules(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, "modules", as_json) as bar:
-            task = bar.add_task("modules", total=len(seed_list), key="")
             result = run_module_bench(
                 seed_list, out, ranges_path=ranges, keep_images=keep_images, client=client,
                 retry_failed=retry_failed,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, "modules", field="key", total=len(seed_list)),
             )
     except InputError as exc:
         raise _fail(console, exc) from exc

@@ -18,7 +18,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -93,7 +93,6 @@ def batch(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, command, as_json) as bar:
-            task = bar.add_task(command, total=len(folders), key="")
             result = run_batch(
                 command,
                 folders,
@@ -101,7 +100,7 @@ def batch(
                 params,
                 client=client,
                 retry_failed=retry_failed,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, command, field="key", total=len(folders)),
             )
     except InputError as exc:
         raise _fail(console, exc) from exc
@@ -190,14 +189,13 @@ def study(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, "study", as_json) as bar:
-            task = bar.add_task("study", total=samples, key="")
             result = run_study(
                 spec,
                 tol,
                 out,
                 cfg,
                 client=client,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, "study", field="key", total=samples),
             )
     except InputError as exc:
         raise _fail(console, exc) from exc

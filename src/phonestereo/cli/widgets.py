@@ -7,6 +7,7 @@ reads the same everywhere and one progress bar looks the same everywhere.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated, Any
 
 import typer
@@ -60,6 +61,22 @@ def progress_bar(
         TextColumn(f"{{task.fields[{field}]}}"),
     )
     return Progress(*cols, console=console, transient=transient, disable=disable)
+
+
+def track(
+    bar: Progress, description: str, *, field: str, total: int | None = None
+) -> Callable[[int, int, str], None]:
+    """Add a task to ``bar`` (a :func:`progress_bar` with ``field``) and return the
+    ``progress(done, total, key)`` callback the library functions take: it moves the task to
+    ``done`` of ``total`` and shows ``key`` in the ``field`` column."""
+    blank: dict[str, Any] = {field: ""}
+    task = bar.add_task(description, total=total, **blank)
+
+    def update(done: int, of: int, key: str) -> None:
+        shown: dict[str, Any] = {field: key}
+        bar.update(task, completed=done, total=of, **shown)
+
+    return update
 
 
 def figure_table(title: str) -> Table:
