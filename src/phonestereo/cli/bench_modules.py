@@ -15,8 +15,8 @@ from rich.console import Console
 from rich.table import Table
 
 from phonestereo.cli.app import app
-from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar, _fail
-from phonestereo.cli.widgets import json_option, track
+from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar
+from phonestereo.cli.widgets import error_exit, json_option, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
@@ -76,7 +76,7 @@ def bench_modules(
                 progress=track(bar, "modules", field="key", total=len(seed_list)),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps({**result.distribution, "files": result.files}, indent=1))
     else:

@@ -18,7 +18,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar, track
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -47,11 +47,6 @@ WorkersOpt = Annotated[
 
 def _bar(console: Console, what: str, quiet: bool) -> Progress:
     return progress_bar(what, console, field="key", disable=quiet)
-
-
-def _fail(console: Console, exc: Exception) -> typer.Exit:
-    console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
-    return typer.Exit(2)
 
 
 @app.command()
@@ -103,7 +98,7 @@ def batch(
                 progress=track(bar, command, field="key", total=len(folders)),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     summary: dict[str, Any] = {
         "command": command,
         "inputs": len(result.rows),
@@ -198,7 +193,7 @@ def study(
                 progress=track(bar, "study", field="key", total=samples),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo((out / "sensitivity.json").read_text())
         return
