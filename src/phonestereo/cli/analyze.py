@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import json_option
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import ANALYSES, run_analysis
 
@@ -45,9 +46,7 @@ def analyze_command(
         ),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the figures and table.")],
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the analysis table as JSON.")
-    ] = False,
+    as_json: Annotated[bool, json_option("Print the analysis table as JSON.")] = False,
 ) -> None:
     """Run a chapter-3 analysis on a capture set: PNG figures and a JSON table into --out.
 

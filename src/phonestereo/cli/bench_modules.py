@@ -15,7 +15,8 @@ from rich.console import Console
 from rich.table import Table
 
 from phonestereo.cli.app import app
-from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar, _fail
+from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar
+from phonestereo.cli.widgets import error_exit, json_option, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
@@ -49,9 +50,7 @@ def bench_modules(
     retry_failed: Annotated[
         bool, typer.Option(help="Rerun modules whose earlier run failed.")
     ] = True,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the distribution as JSON.")
-    ] = False,
+    as_json: Annotated[bool, json_option("Print the distribution as JSON.")] = False,
 ) -> None:
     """Run the demo flow on random modules: one row per module, the distribution, a figure.
 
@@ -71,14 +70,13 @@ def bench_modules(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, "modules", as_json) as bar:
-            task = bar.add_task("modules", total=len(seed_list), key="")
             result = run_module_bench(
                 seed_list, out, ranges_path=ranges, keep_images=keep_images, client=client,
                 retry_failed=retry_failed,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, "modules", field="key", total=len(seed_list)),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps({**result.distribution, "files": result.files}, indent=1))
     else:

@@ -14,7 +14,7 @@ from rich.progress import Progress
 from phonestereo.calibration.from_images import ImageReport, calibrate_from_images, parse_board
 from phonestereo.calibration.solve import CalibrationOptions, intrinsic_extrinsic_covariance
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import figure_table
+from phonestereo.cli.widgets import figure_table, json_option
 from phonestereo.errors import InputError
 from phonestereo.geometry import LENS_MODELS, Rig
 from phonestereo.io import Calibration, save_calibration
@@ -47,7 +47,7 @@ def calibrate(
             help="Iterative outlier rejection (mrcal-like); RMS figures are over the kept points."
         ),
     ] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+    as_json: Annotated[bool, json_option("Print a JSON summary.")] = False,
     plots: Annotated[
         Path | None,
         typer.Option(

@@ -14,6 +14,7 @@ from phonestereo.charts.export import M_PER_INCH, export_pdf, export_png
 from phonestereo.charts.faces import FaceChart
 from phonestereo.charts.verification import VerificationChart
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import json_option
 from phonestereo.errors import InputError
 
 
@@ -45,7 +46,7 @@ def chart_command(
         float,
         typer.Option("--dpi", help="Raster resolution: the face chart in a PDF, or a PNG."),
     ] = 300.0,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the sizes as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print the sizes as JSON.")] = False,
 ) -> None:
     """Write a printable chart at physical size (PDF: chart + scale-bar strip; print at 100 %).
 

@@ -23,6 +23,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from phonestereo.cli.app import app
 from phonestereo.cli.depth import clean, print_bench
 from phonestereo.cli.flow_options import CONFIG_OPTION
+from phonestereo.cli.widgets import json_option
 from phonestereo.errors import InputError
 from phonestereo.evaluation.bench import run_bench
 from phonestereo.flows.config_file import load_flow_config
@@ -52,7 +53,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     workers: Annotated[int, typer.Option(help="Rendering processes.")] = 0,
     config: CONFIG_OPTION = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print the scores as JSON.")] = False,
     roi_jitter: Annotated[
         float,
         typer.Option(

@@ -14,7 +14,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import error_exit
+from phonestereo.cli.widgets import error_exit, json_option
 from phonestereo.errors import InputError, PhysicsError, StoreError
 from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
@@ -46,7 +46,7 @@ def depth(
         str | None, typer.Option("--roi", help="x,y,w,h in raw wide pixels (default: manifest).")
     ] = None,
     config: CONFIG_OPTION = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the results as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print the results as JSON.")] = False,
 ) -> None:
     """Metric depth of the ROI of each capture, with its σ (thesis Fig. 4-2).
 
@@ -179,7 +179,7 @@ def evaluate(
         ),
     ] = None,
     config: CONFIG_OPTION = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the scores as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print the scores as JSON.")] = False,
 ) -> None:
     """Score every stage of the flows against ground truth (the thesis bench, docs/architecture.md).
 

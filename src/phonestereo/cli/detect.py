@@ -10,9 +10,9 @@ from typing import Annotated
 import cv2
 import numpy as np
 import typer
-from rich.console import Console
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import error_exit, json_option, overlay_option
 from phonestereo.errors import InputError
 from phonestereo.features.verification import ChartDetection, detect_verification_chart
 from phonestereo.io import read_gray, write_image
@@ -92,13 +92,8 @@ def detect_chart(
     image: Annotated[
         Path, typer.Argument(help="Image file (PNG, JPEG, ...); colour is made gray.")
     ],
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the result with every corner as JSON.")
-    ] = False,
-    overlay: Annotated[
-        Path | None,
-        typer.Option("--overlay", help="Write a PNG/JPEG with the corners, labels and circles."),
-    ] = None,
+    as_json: Annotated[bool, json_option("Print the result with every corner as JSON.")] = False,
+    overlay: Annotated[Path | None, overlay_option("corners, labels and circles")] = None,
     roi: Annotated[
         str | None, typer.Option("--roi", help="Search only x,y,w,h (pixels of the image).")
     ] = None,
@@ -125,7 +120,6 @@ def detect_chart(
             f"got {rotation_hint_deg}",
             param_hint="--rotation-hint",
         )
-    console = Console(stderr=True)
     try:
         img = read_gray(image)
         det = detect_verification_chart(
@@ -134,8 +128,7 @@ def detect_chart(
         if overlay is not None:
             write_image(overlay, draw_overlay(img, det))
     except InputError as exc:
-        console.print(f"[red]error:[/red] {exc}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps({"image": str(image), **det.to_dict()}))
     elif det.found:

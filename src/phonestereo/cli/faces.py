@@ -8,9 +8,9 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.console import Console
 
 from phonestereo.cli.app import app
+from phonestereo.cli.widgets import error_exit, json_option, overlay_option
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import MediaPipeBackend, read_color, read_openface_csv
 from phonestereo.features.landmarks.base import FaceResult
@@ -39,12 +39,9 @@ def _summary(image: Path, res: FaceResult) -> str:
 def faces(
     image: Annotated[Path, typer.Argument(help="Image file (PNG, JPEG, ...).")],
     as_json: Annotated[
-        bool, typer.Option("--json", help="Print the result as JSON (pixels, docs/conventions.md).")
+        bool, json_option("Print the result as JSON (pixels, docs/conventions.md).")
     ] = False,
-    overlay: Annotated[
-        Path | None,
-        typer.Option("--overlay", help="Write a PNG/JPEG with the faces, pupils and labels."),
-    ] = None,
+    overlay: Annotated[Path | None, overlay_option("faces, pupils and labels")] = None,
     openface_csv: Annotated[
         Path | None,
         typer.Option(
@@ -70,7 +67,6 @@ def faces(
 
     Example: phonestereo faces portrait.jpg --json --overlay portrait_faces.png
     """
-    console = Console(stderr=True)
     try:
         img = read_color(image)
         if openface_csv is not None:
@@ -82,8 +78,7 @@ def faces(
         if overlay is not None:
             write_image(overlay, draw_faces(img, res))
     except InputError as exc:
-        console.print(f"[red]error:[/red] {exc}")
-        raise typer.Exit(2) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo(json.dumps({"image": str(image), **res.to_dict(landmarks)}))
     else:

@@ -11,7 +11,7 @@ from typing import Annotated, Any
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit
+from phonestereo.cli.widgets import error_exit, json_option
 from phonestereo.errors import InputError
 from phonestereo.geometry.transform import SNAP_TOLERANCE, orthonormality_error
 from phonestereo.io import (
@@ -64,7 +64,7 @@ def check_set(
             "format and size)."
         ),
     ] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+    as_json: Annotated[bool, json_option("Print a JSON summary.")] = False,
 ) -> None:
     """Validate a capture set: manifest fields, image and calibration files (docs/capture-set.md).
 
@@ -128,7 +128,7 @@ def convert_calibration(
         str, typer.Option(help="Which camera is OpenCV's camera 1: wide or tele.")
     ] = "wide",
     as_json: Annotated[
-        bool, typer.Option("--json", help="Print what was written and what was changed as JSON.")
+        bool, json_option("Print what was written and what was changed as JSON.")
     ] = False,
 ) -> None:
     """Convert a calibration between phonestereo JSON and OpenCV FileStorage YAML.

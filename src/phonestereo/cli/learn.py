@@ -15,7 +15,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
 from phonestereo.errors import InputError, StoreError
 from phonestereo.flows.config_file import load_flow_config
 from phonestereo.flows.learning import IpdMode, LearningResult
@@ -102,7 +102,6 @@ def learn(
             FixStore(store) as fs,
             progress_bar("learning", console, field="capture", disable=as_json) as bar,
         ):
-            task = bar.add_task("learn", total=None, capture="")
             res = run_learning(
                 cfg,
                 cs,
@@ -110,9 +109,7 @@ def learn(
                 fs,
                 ipd=mode,
                 new_context=new_context,
-                progress=lambda done, total, cid: bar.update(
-                    task, completed=done, total=total, capture=cid
-                ),
+                progress=track(bar, "learn", field="capture"),
             )
     except (InputError, StoreError) as exc:
         raise error_exit(exc) from exc

@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, figure_table
+from phonestereo.cli.widgets import error_exit, figure_table, json_option
 from phonestereo.errors import InputError
 from phonestereo.features.keypoints import DETECTORS
 from phonestereo.features.match_input import parse_roi
@@ -118,7 +118,7 @@ def match(
     fast: Annotated[
         bool, typer.Option("--fast", help="Speed preset: fewer keypoints, translation-only fit.")
     ] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the matches as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print the matches as JSON.")] = False,
 ) -> None:
     """Sparse sub-pixel matching: DoG keypoints, NCC along the row, 2-D Lucas–Kanade.
 

@@ -12,7 +12,7 @@ from rich.console import Console
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import require_output_folder
-from phonestereo.cli.widgets import error_exit, figure_table
+from phonestereo.cli.widgets import error_exit, figure_table, json_option
 from phonestereo.errors import InputError
 from phonestereo.io import load_calibration, read_gray, write_image
 from phonestereo.rectification import MODES, Rectification, RectifyOptions, check_mode
@@ -94,7 +94,7 @@ def rectify(
         str | None, typer.Option(help="Window from a raw wide ROI X,Y,W,H (overrides --fov).")
     ] = None,
     margin: Annotated[int, typer.Option(help="Extra rectified pixels around the window.")] = 0,
-    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+    as_json: Annotated[bool, json_option("Print a JSON summary.")] = False,
 ) -> None:
     """Rectify a wide/tele pair in one of the thesis's three modes.
 

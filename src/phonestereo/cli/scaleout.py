@@ -18,7 +18,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -47,11 +47,6 @@ WorkersOpt = Annotated[
 
 def _bar(console: Console, what: str, quiet: bool) -> Progress:
     return progress_bar(what, console, field="key", disable=quiet)
-
-
-def _fail(console: Console, exc: Exception) -> typer.Exit:
-    console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
-    return typer.Exit(2)
 
 
 @app.command()
@@ -93,7 +88,6 @@ def batch(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, command, as_json) as bar:
-            task = bar.add_task(command, total=len(folders), key="")
             result = run_batch(
                 command,
                 folders,
@@ -101,10 +95,10 @@ def batch(
                 params,
                 client=client,
                 retry_failed=retry_failed,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, command, field="key", total=len(folders)),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     summary: dict[str, Any] = {
         "command": command,
         "inputs": len(result.rows),
@@ -190,17 +184,16 @@ def study(
         if scheduler is not None:
             check_address(scheduler)
         with dask_client(scheduler, workers) as client, _bar(console, "study", as_json) as bar:
-            task = bar.add_task("study", total=samples, key="")
             result = run_study(
                 spec,
                 tol,
                 out,
                 cfg,
                 client=client,
-                progress=lambda d, t, k: bar.update(task, completed=d, total=t, key=k),
+                progress=track(bar, "study", field="key", total=samples),
             )
     except InputError as exc:
-        raise _fail(console, exc) from exc
+        raise error_exit(exc) from exc
     if as_json:
         typer.echo((out / "sensitivity.json").read_text())
         return

@@ -20,7 +20,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import prepare_capture_set_folder
-from phonestereo.cli.widgets import JSON_SUMMARY, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, json_option, progress_bar
 from phonestereo.errors import InputError
 from phonestereo.sim.module import EFFECT_NAMES, ModuleSpec, list_presets, load_module
 from phonestereo.sim.scenarios import SCENARIOS, plan_scenario
@@ -165,7 +165,7 @@ def _export(name: str, out: Path, plan: Any) -> None:
 
 @module_app.command("list")
 def module_list(
-    as_json: Annotated[bool, typer.Option("--json", help="Print as JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print as JSON.")] = False,
 ) -> None:
     """List the module presets."""
     rows = [(name, load_module(name).description) for name in list_presets()]
@@ -181,9 +181,7 @@ def module_list(
 @module_app.command("show")
 def module_show(
     module: Annotated[str, typer.Argument(help="Preset name or path of a module JSON file.")],
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the full spec (the module JSON schema).")
-    ] = False,
+    as_json: Annotated[bool, json_option("Print the full spec (the module JSON schema).")] = False,
 ) -> None:
     """Show a module preset (or your module JSON): optics, rig and effect magnitudes.
 
@@ -222,9 +220,7 @@ def module_random(
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Write the module JSON here.")
     ] = None,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="Print the module JSON (default when no --out).")
-    ] = False,
+    as_json: Annotated[bool, json_option("Print the module JSON (default when no --out).")] = False,
 ) -> None:
     """Draw a physically consistent random module from documented ranges.
 
@@ -240,8 +236,7 @@ def module_random(
     try:
         spec = random_module(seed, load_ranges(ranges))
     except InputError as err:
-        Console(stderr=True).print(f"[red]error:[/red] {err}", soft_wrap=True)
-        raise typer.Exit(2) from err
+        raise error_exit(err) from err
     text = spec.to_json()
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit
+from phonestereo.cli.widgets import error_exit, json_option
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
 from phonestereo.learning.store_open import open_for_reading
@@ -86,7 +86,7 @@ def format_stats(s: StoreStats) -> str:
 @store_app.command("stats")
 def stats(
     file: Annotated[Path, _FILE],
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    as_json: Annotated[bool, json_option("Print JSON.")] = False,
 ) -> None:
     """Counts per orientation bucket, focus group and source; value ranges; the contexts
     (calibration, lens model, rectification mode, flow config) and the capture sets learned

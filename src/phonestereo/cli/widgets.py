@@ -7,7 +7,8 @@ reads the same everywhere and one progress bar looks the same everywhere.
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -22,8 +23,21 @@ from rich.progress import (
 )
 from rich.table import Table
 
+
+def json_option(help: str = "Print the summary as JSON.") -> Any:
+    """The ``--json`` flag with a command's own ``help``: print the result as JSON (for scripts)
+    instead of tables. Use as ``as_json: Annotated[bool, json_option("...")] = False``."""
+    return typer.Option("--json", help=help)
+
+
+def overlay_option(what: str) -> Any:
+    """The ``--overlay FILE`` option of a detector: write a PNG/JPEG with ``what`` drawn on
+    the image. Use as ``overlay: Annotated[Path | None, overlay_option("...")] = None``."""
+    return typer.Option("--overlay", help=f"Write a PNG/JPEG with the {what}.")
+
+
 #: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
-JSON_SUMMARY = Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")]
+JSON_SUMMARY = Annotated[bool, json_option()]
 
 
 def error_exit(exc: Exception) -> typer.Exit:
@@ -47,6 +61,22 @@ def progress_bar(
         TextColumn(f"{{task.fields[{field}]}}"),
     )
     return Progress(*cols, console=console, transient=transient, disable=disable)
+
+
+def track(
+    bar: Progress, description: str, *, field: str, total: int | None = None
+) -> Callable[[int, int, str], None]:
+    """Add a task to ``bar`` (a :func:`progress_bar` with ``field``) and return the
+    ``progress(done, total, key)`` callback the library functions take: it moves the task to
+    ``done`` of ``total`` and shows ``key`` in the ``field`` column."""
+    blank: dict[str, Any] = {field: ""}
+    task = bar.add_task(description, total=total, **blank)
+
+    def update(done: int, of: int, key: str) -> None:
+        shown: dict[str, Any] = {field: key}
+        bar.update(task, completed=done, total=of, **shown)
+
+    return update
 
 
 def figure_table(title: str) -> Table:

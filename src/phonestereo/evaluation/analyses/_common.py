@@ -3,11 +3,13 @@ kind, writing the JSON table, figure saving, JSON cleaning, per-corner maps."""
 
 from __future__ import annotations
 
+import functools
+import inspect
 import json
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Concatenate, NamedTuple, ParamSpec, TypeVar
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -21,6 +23,7 @@ from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
 T = TypeVar("T")
+P = ParamSpec("P")
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
@@ -84,15 +87,69 @@ def open_set(capture_set: str | Path | CaptureSet) -> tuple[CaptureSet, Rig]:
     return cs, load_calibration(cs.calibration_path()).rig
 
 
-def open_canonical(
-    capture_set: str | Path | CaptureSet,
-) -> tuple[float, CaptureSet, Rig, Rectification]:
+class OpenedSet(NamedTuple):
+    """A capture set opened for a canonical-mode analysis (:func:`open_canonical`)."""
+
+    #: ``time.perf_counter()`` at the start, for :func:`seconds_since`.
+    t0: float
+    #: The capture set, loaded and validated.
+    cs: CaptureSet
+    #: Its calibration's rig.
+    rig: Rig
+    #: The rig's ``canonical`` rectification.
+    rect: Rectification
+
+
+def open_canonical(capture_set: str | Path | CaptureSet) -> OpenedSet:
     """Every canonical-mode analysis's prologue: the clock at the start (``time.perf_counter``,
     for :func:`seconds_since`), the set and its rig (:func:`open_set`), and the rig's
     ``canonical`` rectification."""
     t0 = time.perf_counter()
     cs, rig = open_set(capture_set)
-    return t0, cs, rig, Rectification.from_rig(rig, "canonical")
+    return OpenedSet(t0, cs, rig, Rectification.from_rig(rig, "canonical"))
+
+
+_RAISES = """
+
+    Raises
+    ------
+    InputError
+        An invalid set, or one {lacking}.
+    """
+
+#: An analysis body: the opened set, then its own keyword arguments.
+Body = Callable[Concatenate[OpenedSet, P], T]
+#: The public analysis: a capture-set folder or :class:`CaptureSet`, then the same arguments.
+Analysis = Callable[Concatenate[str | Path | CaptureSet, P], T]
+
+
+def canonical_analysis(lacking: str) -> Callable[[Body[P, T]], Analysis[P, T]]:
+    """Decorator: the public ``analyze_*(capture_set, ...)`` of a canonical-mode analysis from
+    its body ``analyze_*(opened, ...)``, which takes the set :func:`open_canonical` opened.
+
+    The public function opens ``capture_set`` (a folder, or a loaded :class:`CaptureSet`) and
+    passes the body's other arguments on; its docstring is the body's with the Raises section
+    every analysis shares: an invalid set, or one ``lacking`` (e.g. "without a refocus stack
+    of verification captures"), raises :class:`~phonestereo.errors.InputError`.
+    """
+
+    def wrap(body: Body[P, T]) -> Analysis[P, T]:
+        @functools.wraps(body)
+        def analyze(
+            capture_set: str | Path | CaptureSet, /, *args: P.args, **kwargs: P.kwargs
+        ) -> T:
+            return body(open_canonical(capture_set), *args, **kwargs)
+
+        analyze.__doc__ = (body.__doc__ or "").rstrip() + _RAISES.format(lacking=lacking)
+        sig = inspect.signature(body)  # help() shows capture_set, not the body's OpenedSet
+        first, *rest = sig.parameters.values()
+        analyze.__signature__ = sig.replace(  # type: ignore[attr-defined]
+            parameters=[first.replace(name="capture_set", annotation="str | Path | CaptureSet",
+                                      kind=inspect.Parameter.POSITIONAL_ONLY), *rest]
+        )
+        return analyze
+
+    return wrap
 
 
 def seconds_since(t0: float) -> float:
@@ -184,6 +241,8 @@ def run_table(
 
 __all__ = [
     "MIN_ATTEMPTS",
+    "OpenedSet",
+    "canonical_analysis",
     "captures_of_kind",
     "image_axes",
     "json_clean",

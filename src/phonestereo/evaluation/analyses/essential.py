@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -41,11 +40,12 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
     MIN_ATTEMPTS,
+    OpenedSet,
+    canonical_analysis,
     label_axes,
-    open_canonical,
     refocus_stacks,
     run_table,
     seconds_since,
@@ -61,8 +61,6 @@ from phonestereo.fixes.essential_compare import (
 from phonestereo.geometry import Rig
 from phonestereo.io import CaptureSet
 from phonestereo.rectification import Rectification
-
-Progress = Callable[[int, int, str], None]
 
 
 def measure_stacks(
@@ -138,17 +136,10 @@ def _score(cmp: VariantComparison, true: Any) -> dict[str, float | None]:
     return out
 
 
-def analyze_essential(
-    capture_set: str | Path | CaptureSet, *, progress: Progress | None = None
-) -> dict[str, Any]:
-    """Compare the essential-matrix scale methods on every refocus stack (module docstring).
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one without a refocus stack of verification captures.
-    """
-    t0, cs, rig, rect = open_canonical(capture_set)
+@canonical_analysis(lacking="without a refocus stack of verification captures")
+def analyze_essential(opened: OpenedSet, *, progress: Progress | None = None) -> dict[str, Any]:
+    """Compare the essential-matrix scale methods on every refocus stack (module docstring)."""
+    t0, cs, rig, rect = opened
     stacks, rows = measure_stacks(cs, rect, "essential", progress)
     base = {"analysis": "essential", "capture_set": str(cs.root), "captures": rows}
     groups: dict[str, Any] = {}

@@ -20,16 +20,16 @@ relative errors before / after, per stack).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
-    open_canonical,
+    OpenedSet,
+    canonical_analysis,
     run_table,
     seconds_since,
 )
@@ -38,11 +38,9 @@ from phonestereo.evaluation.analyses.essential import MIN_ATTEMPTS, measure_stac
 from phonestereo.fixes.essential_compare import MIN_POINTS, shared_points
 from phonestereo.fixes.focus import fit_scale_offset, normalise_to_median
 from phonestereo.geometry import Rig
-from phonestereo.io import CaptureSet
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
-Progress = Callable[[int, int, str], None]
 
 
 def optimal_correction(
@@ -89,17 +87,10 @@ def _motion(root: Path, ids: list[str]) -> Any:
     return out
 
 
-def analyze_handheld(
-    capture_set: str | Path | CaptureSet, *, progress: Progress | None = None
-) -> dict[str, Any]:
-    """Disparity ranges and relative errors before/after the optimal correction, per stack.
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one without a refocus stack of verification captures.
-    """
-    t0, cs, rig, rect = open_canonical(capture_set)
+@canonical_analysis(lacking="without a refocus stack of verification captures")
+def analyze_handheld(opened: OpenedSet, *, progress: Progress | None = None) -> dict[str, Any]:
+    """Disparity ranges and relative errors before/after the optimal correction, per stack."""
+    t0, cs, rig, rect = opened
     stacks, rows = measure_stacks(cs, rect, "handheld", progress)
     groups: dict[str, Any] = {}
     for g, atts in stacks.items():

@@ -19,7 +19,6 @@ when the module reports temperature, ``heating_temperature.png`` (d vs temperatu
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +26,12 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
+    OpenedSet,
+    canonical_analysis,
     label_axes,
     measure_each,
-    open_canonical,
     seconds_since,
     write_output,
 )
@@ -58,7 +58,6 @@ F64 = np.ndarray
 TABLE1_DEPTHS_M = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)
 MIN_COMMON = 12  # fewest corners seen in every capture before falling back to all corners
 RATE_WINDOW = 3  # captures (this one and the ones before) in a measured drift rate
-Progress = Callable[[int, int, str], None]
 
 
 def _series(ms: list[CaptureMeasurement]) -> tuple[np.ndarray, F64, F64, np.ndarray]:
@@ -123,8 +122,9 @@ def _check_needs(cs: CaptureSet) -> list[CaptureEntry]:
     return sorted(caps, key=lambda c: c.time_s or 0.0)
 
 
+@canonical_analysis(lacking="lacking the captures the analysis needs (message names them)")
 def analyze_heating(
-    capture_set: str | Path | CaptureSet,
+    opened: OpenedSet,
     *,
     min_time_s: float = 180.0,
     max_drift_rate_px_per_s: float = 0.002,
@@ -143,13 +143,8 @@ def analyze_heating(
         ``RATE_WINDOW`` captures (0.002 px/s ≈ 0.14 px still to come with τ = 70 s).
     saturation_fraction : float
         Fraction of the drift that defines the saturation time.
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one lacking the captures the analysis needs (message names them).
     """
-    t0, cs, _, rect = open_canonical(capture_set)
+    t0, cs, _, rect = opened
     caps = _check_needs(cs)
     n_min = MIN_SAMPLES
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect, min_corners=n_min), progress)

@@ -24,7 +24,6 @@ disparity of every capture coloured by bucket, and the per-bucket offsets) and
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,11 +31,12 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from phonestereo.errors import InputError
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
+    OpenedSet,
+    canonical_analysis,
     label_axes,
     measure_each,
-    open_canonical,
     run_table,
     seconds_since,
 )
@@ -53,7 +53,6 @@ from phonestereo.io import CaptureEntry, CaptureSet
 from phonestereo.rectification import Rectification
 
 F64 = np.ndarray
-Progress = Callable[[int, int, str], None]
 MIN_SHARED = 8  # fewest corners seen in every capture
 
 
@@ -109,17 +108,10 @@ def _offsets_rows(fit: OrientationOffsets) -> dict[str, Any]:
     return {k: v.to_dict() for k, v in fit.offsets.items()}
 
 
-def analyze_orientation(
-    capture_set: str | Path | CaptureSet, *, progress: Progress | None = None
-) -> dict[str, Any]:
-    """Measure the per-orientation disparity offset of a capture set (see module docstring).
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one without verification captures in two orientations.
-    """
-    t0, cs, _, rect = open_canonical(capture_set)
+@canonical_analysis(lacking="without verification captures in two orientations")
+def analyze_orientation(opened: OpenedSet, *, progress: Progress | None = None) -> dict[str, Any]:
+    """Measure the per-orientation disparity offset of a capture set (see module docstring)."""
+    t0, cs, _, rect = opened
     caps, buckets = _check_needs(cs)
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     base = {"analysis": "orientation", "capture_set": str(cs.root), "captures_total": len(ms)}

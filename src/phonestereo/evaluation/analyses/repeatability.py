@@ -21,19 +21,19 @@ the fitted per-attempt scales are compared with the true focal-length ratios. Ou
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
+    OpenedSet,
+    canonical_analysis,
     label_axes,
     map_panel,
     measure_each,
-    open_canonical,
     refocus_stacks,
     run_table,
     save_figure,
@@ -46,7 +46,6 @@ from phonestereo.io import CaptureEntry, CaptureSet, read_gray
 
 F64 = np.ndarray
 AVERAGE_N = (1, 3, 5)  # attempts averaged (Table 3 rows)
-Progress = Callable[[int, int, str], None]
 
 
 # --- shared with the wt-scale analysis ------------------------------------------------------
@@ -92,8 +91,9 @@ def _truth_scales(root: Path, ids: list[str]) -> Any:
     }
 
 
+@canonical_analysis(lacking="without a refocus stack of verification captures")
 def analyze_repeatability(
-    capture_set: str | Path | CaptureSet,
+    opened: OpenedSet,
     *,
     trials: int = 200,
     seed: int = 0,
@@ -108,13 +108,8 @@ def analyze_repeatability(
         Random draws of n attempts per Table 3 row.
     seed : int
         Seed of those draws.
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one without a refocus stack of verification captures.
     """
-    t0, cs, rig, rect = open_canonical(capture_set)
+    t0, cs, rig, rect = opened
     caps = stack_entries(cs, "repeatability", "one static verification chart")
     ms = measure_each(caps, lambda c: measure_capture(cs, c, rect), progress)
     focus = focus_check(cs, caps)

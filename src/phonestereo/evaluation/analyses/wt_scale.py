@@ -29,21 +29,18 @@ import numpy as np
 from matplotlib.figure import Figure
 from scipy.spatial import cKDTree
 
-from phonestereo.evaluation.analyses import AnalysisOutput
+from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
+    OpenedSet,
+    canonical_analysis,
     label_axes,
+    map_panel,
     measure_each,
-    open_canonical,
     run_table,
+    save_figure,
     seconds_since,
 )
-from phonestereo.evaluation.analyses.repeatability import (
-    Progress,
-    focus_check,
-    map_panel,
-    save_figure,
-    stack_entries,
-)
+from phonestereo.evaluation.analyses.repeatability import focus_check, stack_entries
 from phonestereo.evaluation.chart_ruler import corner_keys, match_detections
 from phonestereo.features.verification import detect_verification_chart
 from phonestereo.fixes.focus import MIN_POINTS
@@ -221,17 +218,12 @@ def _stack_stats(rows: list[dict[str, Any]], k: int, rect: Rectification) -> Any
     return out
 
 
+@canonical_analysis(lacking="without a refocus stack of verification captures")
 def analyze_wt_scale(
-    capture_set: str | Path | CaptureSet, *, max_charts: int = 2, progress: Progress | None = None
+    opened: OpenedSet, *, max_charts: int = 2, progress: Progress | None = None
 ) -> dict[str, Any]:
-    """Measure the W-T scale of a refocus stack; the JSON-ready table (module docstring).
-
-    Raises
-    ------
-    InputError
-        An invalid set, or one without a refocus stack of verification captures.
-    """
-    t0, cs, _, rect = open_canonical(capture_set)
+    """Measure the W-T scale of a refocus stack; the JSON-ready table (module docstring)."""
+    t0, cs, _, rect = opened
     caps = stack_entries(cs, "wt-scale", "one or two static verification charts")
     c = np.asarray(rect.tele_rect.K[:2, 2], dtype=np.float64)
     rows = measure_each(
