@@ -142,23 +142,27 @@ def ncc_search(
     searched = np.zeros(n, bool)
     ccoeff = cv2.TM_CCOEFF_NORMED
 
-    def forward(chunk: Sequence[int]) -> None:  # writes row i of cs, lo, hi, searched only
-        for i in chunk:
-            x, y = int(pts[i, 0]), int(pts[i, 1])
-            xa, xb = max(x - max_d - r, 0), min(x - min_d + r + 1, w)
-            if xb - xa < 2 * r + 3 or y - ty - r < 0 or y + ty + r + 1 > h:
-                continue
-            off = xa - (x - max_d - r)
-            cols = xb - xa - 2 * r
+    # each band's columns xa … xb − 1 in the right image, its first disparity column `off`
+    # (vectorised: the loop below only slices and calls OpenCV)
+    xa = np.maximum(pts[:, 0] - max_d - r, 0)
+    xb = np.minimum(pts[:, 0] - min_d + r + 1, w)
+    off = xa - (pts[:, 0] - max_d - r)
+    fits = (xb - xa >= 2 * r + 3) & (pts[:, 1] - ty - r >= 0) & (pts[:, 1] + ty + r + 1 <= h)
+    lo[fits], hi[fits], searched[fits] = off[fits], (off + xb - xa - 2 * r - 1)[fits], True
+    rows = zip(pts[:, 0].tolist(), pts[:, 1].tolist(), xa.tolist(), xb.tolist(), off.tolist(),
+               strict=True)
+    bands = [(i, *b) for i, (b, ok) in enumerate(zip(rows, fits.tolist(), strict=True)) if ok]
+
+    def forward(chunk: Sequence[tuple[int, int, int, int, int, int]]) -> None:  # row i of cs
+        for i, x, y, a, b, o in chunk:
             cv2.matchTemplate(
-                right[y - ty - r : y + ty + r + 1, xa:xb],
+                right[y - ty - r : y + ty + r + 1, a:b],
                 left[y - r : y + r + 1, x - r : x + r + 1],
                 ccoeff,
-                result=cs[i, :, off : off + cols],
+                result=cs[i, :, o : o + b - a - 2 * r],
             )
-            lo[i], hi[i], searched[i] = off, off + cols - 1, True
 
-    run_split(forward, range(n))
+    run_split(forward, bands)
     k = np.arange(n)
     flat = cs.reshape(n, -1).argmax(axis=1)
     iy, ix = flat // nc, flat % nc
@@ -179,20 +183,27 @@ def ncc_search(
     unique = best >= 0 if np.isinf(lr_uniqueness) else ~(second >= lr_uniqueness * best)
     lr_run = inner & (best >= lr_min_score) & unique
 
-    def backward(chunk: Sequence[int]) -> None:  # the right window back along the left row y
-        for i in chunk:
-            x, y = int(pts[i, 0]), int(pts[i, 1])
-            xr, yr = x - max_d + int(ix[i]), y - ty + int(iy[i])
-            la, lb = max(xr + min_d - r, 0), min(xr + max_d + r + 1, w)
-            if lb - la >= 2 * r + 1:
-                back = cv2.matchTemplate(
-                    left[y - r : y + r + 1, la:lb],
-                    right[yr - r : yr + r + 1, xr - r : xr + r + 1],
-                    ccoeff,
-                )
-                lr_ok[i] = abs(la + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
+    run_i = np.flatnonzero(lr_run)
+    xr = pts[run_i, 0] - max_d + ix[run_i]  # the right window's centre (xr, yr)
+    yr = pts[run_i, 1] - ty + iy[run_i]
+    la, lb = np.maximum(xr + min_d - r, 0), np.minimum(xr + max_d + r + 1, w)
+    back_ok = lb - la >= 2 * r + 1
+    backs = [
+        b for b, ok in zip(
+            zip(run_i.tolist(), pts[run_i, 0].tolist(), pts[run_i, 1].tolist(), xr.tolist(),
+                yr.tolist(), la.tolist(), lb.tolist(), strict=True),
+            back_ok.tolist(), strict=True,
+        ) if ok
+    ]
 
-    run_split(backward, np.flatnonzero(lr_run).tolist())
+    def backward(chunk: Sequence[tuple[int, ...]]) -> None:  # right window back along row y
+        for i, x, y, u, v, a, b in chunk:
+            back = cv2.matchTemplate(
+                left[y - r : y + r + 1, a:b], right[v - r : v + r + 1, u - r : u + r + 1], ccoeff
+            )
+            lr_ok[i] = abs(a + r + cv2.minMaxLoc(back)[3][0] - x) <= lr_tolerance
+
+    run_split(backward, backs)
     return SearchResult(
         searched=searched,
         d0=d0,

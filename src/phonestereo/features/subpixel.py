@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
-from phonestereo.features.crlb import sandwich, solve_spd
+from phonestereo.features.crlb import einsum, sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
 from phonestereo.features.spline_gradients import PREFILTER, TAPS, image_gradients
 
@@ -138,7 +138,7 @@ def sample_windows(
 
 def _wsum(a: NDArray[Any], w: NDArray[Any]) -> NDArray[Any]:
     """Σ_p a[k, p]·w[p] per row, without BLAS (its gemv wakes a second thread per call)."""
-    return np.einsum("kp,p->k", a, w)
+    return einsum("kp,p->k", a, w)
 
 
 def _with_const(basis_part: F64, const: F64) -> F64:
@@ -154,7 +154,7 @@ def _moments(bw: F64, b: NDArray[Any], w: F64, corner: float) -> F64:
     constant row's own moment."""
     k, q = bw.shape[0], bw.shape[1] + 1
     g = np.empty((k, q, q))
-    g[:, :-1, :-1] = np.einsum("kqp,krp->kqr", bw, b)
+    g[:, :-1, :-1] = einsum("kqp,krp->kqr", bw, b)
     g[:, :-1, -1] = g[:, -1, :-1] = _wsum(b.reshape(-1, b.shape[-1]), w).reshape(k, q - 1)
     g[:, -1, -1] = corner
     return g
@@ -293,7 +293,7 @@ def _refine(
     bw = base * wts  # (n, q − 2, M²), float64: Σ over p of bw·x is Σ w b_i x
     gram1 = _moments(bw, base, wts, wts.sum())  # Σ w b_i b_j, the constant row included
     gram2 = _moments(bw, bw, wts, (wts * wts).sum())  # Σ w² b_i b_j
-    bt = _with_const(np.einsum("kqp,kp->kq", bw, tmpl), _wsum(tmpl, wts))  # Σ w b_i L
+    bt = _with_const(einsum("kqp,kp->kq", bw, tmpl), _wsum(tmpl, wts))  # Σ w b_i L
     wn32 = wn.astype(np.float32)
     theta = np.zeros((n, N_PARAMS))
     theta[:, 0], theta[:, 1] = d0, e0
@@ -322,8 +322,8 @@ def _refine(
         vw = val32 * wts  # w·R, float64
         a, b = th[:, 2].copy(), th[:, 3].copy()
         g1 = gram1[sel]
-        pv = _with_const(np.einsum("kqp,kp->kq", bw[sel], val32), vw.sum(axis=1))  # Σ w b_i R
-        rr, rl = np.einsum("kp,kp->k", vw, val32), np.einsum("kp,kp->k", vw, t)  # Σ w R², R L
+        pv = _with_const(einsum("kqp,kp->kq", bw[sel], val32), vw.sum(axis=1))  # Σ w b_i R
+        rr, rl = einsum("kp,kp->k", vw, val32), einsum("kp,kp->k", vw, t)  # Σ w R², R L
         # Σ w [b, R] res with res = L − a·R − b, from the moments (no residual image)
         proj_res = np.concatenate(
             [
@@ -349,8 +349,8 @@ def _refine(
             vwi = vw[i]
             g2 = _gram(  # Σ w² [b, R] [b, R]
                 gram2[ai],
-                _with_const(np.einsum("kqp,kp->kq", bw[ai], vwi), _wsum(vwi, wts)),
-                np.einsum("kp,kp->k", vwi, vwi),
+                _with_const(einsum("kqp,kp->kq", bw[ai], vwi), _wsum(vwi, wts)),
+                einsum("kp,kp->k", vwi, vwi),
             )
             c = chain[i]
             c_cov, dof = sandwich(hess[i], c @ g2 @ c.transpose(0, 2, 1), wts.sum())

@@ -75,10 +75,11 @@ def _aligned_tiles(
             if min(ly, lx, ry, rx) < 0 or ly + n > a.shape[0] or lx + n > a.shape[1] or (
                     ry + n + 2 * r > b.shape[0] or rx + n + 2 * r > b.shape[1]):
                 continue
-            ta = np.ascontiguousarray(a[ly : ly + n, lx : lx + n])
+            # float32 per tile (the same values as slicing a float32 copy of the image)
+            ta = np.ascontiguousarray(a[ly : ly + n, lx : lx + n], dtype=np.float32)
             if pixel_std(ta[m:-m, m:-m]) < 1.0:  # flat: says nothing about blur
                 continue
-            tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r])
+            tb = np.ascontiguousarray(b[ry : ry + n + 2 * r, rx : rx + n + 2 * r], np.float32)
             dx, dy = _residual_shift(ta[m:-m, m:-m], tb[m:-m, m:-m])
             # out(u, v) = tb(u + r + dx, v + r + dy): the tile's own offset taken out
             out[i] = (ta, _shifted(tb, r + dx, r + dy, n))
@@ -159,6 +160,10 @@ def equalise_blur(
 
     ``part`` (x0, y0, x1, y1): the only pixels the caller reads; the chosen blur is applied
     there (with the same values as on the whole image) and the rest is left unblurred.
+
+    An image that is not blurred is returned as given (the matcher converts the part it reads
+    to float32 itself); a blurred one as float32. Only the tiles are converted to float32 for
+    the comparison (at 12 MP the whole window's two float32 copies cost more than the tiles).
     """
     x, y, w, h = box
     xi, yi = round(d0), round(e0)
@@ -167,8 +172,7 @@ def equalise_blur(
     y0, y1 = max(y, yi), min(y + h, H + yi)
     if x1 - x0 < 16 or y1 - y0 < 16:
         return left, right, 0.0, 0.0
-    a = np.asarray(left, np.float32)
-    b = np.asarray(right, np.float32)
+    a, b = np.asarray(left), np.asarray(right)
     m = int(np.ceil(3 * max(sigmas))) + 1  # blur border: candidates see real pixels only
     pairs = _aligned_tiles(a, b, (x0, y0, x1, y1), (xi, yi), m)
     if not pairs:
@@ -240,17 +244,18 @@ def equalise_blur(
 
 
 def _blurred(img: Any, sigma: float, part: tuple[int, int, int, int] | None) -> Any:
-    """``img`` blurred by ``sigma`` (cv2.GaussianBlur), or only inside ``part``: that box and
-    the kernel's reach around it are blurred (OpenCV's float kernel reaches
+    """``img`` as float32 blurred by ``sigma`` (cv2.GaussianBlur), or only inside ``part``:
+    that box and the kernel's reach around it are blurred (OpenCV's float kernel reaches
     round(8σ + 1) // 2 ≤ 4σ + 1 px), so the pixels in ``part`` are the whole image's."""
     if part is None:
-        return cv2.GaussianBlur(img, (0, 0), sigma)
+        return cv2.GaussianBlur(np.asarray(img, np.float32), (0, 0), sigma)
     x0, y0, x1, y1 = part
     r = int(np.ceil(4 * sigma)) + 1
     h, w = img.shape[:2]
     bx, by = max(x0 - r, 0), max(y0 - r, 0)
-    blurred = cv2.GaussianBlur(img[by : min(y1 + r, h), bx : min(x1 + r, w)], (0, 0), sigma)
-    out = img.copy()
+    src = np.asarray(img[by : min(y1 + r, h), bx : min(x1 + r, w)], np.float32)
+    blurred = cv2.GaussianBlur(src, (0, 0), sigma)
+    out = img.astype(np.float32)  # a new array: the caller's image is not written
     out[y0:y1, x0:x1] = blurred[y0 - by : y1 - by, x0 - bx : x1 - bx]
     return out
 
