@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from phonestereo.errors import InputError
-from phonestereo.fixes.breathing import correct_depth, focal_breathing_scale
+from phonestereo.fixes.breathing import correct_depth, focal_breathing_scale, focus_sigma_rel
 from phonestereo.io import load_calibration
 from phonestereo.io.calibration import calibration_from_dict, calibration_to_dict
 from phonestereo.sim import effects as fx
@@ -59,3 +59,16 @@ def test_calibration_keeps_the_wide_focal_length(tmp_path: Path) -> None:
     del d["conditions"]["wide_focal_length_mm"]  # optional: older files load unchanged
     path.write_text(json.dumps(d))
     assert load_calibration(path).conditions.wide_focal_length_mm is None
+
+
+def test_focus_sigma_is_the_scale_derivative_times_the_report_sigma() -> None:
+    # σ_rel = |d ln(scale)/dD|·σ_D: checked against the thin-lens scale's own numerical
+    # derivative (central difference, step 1e-4 D; agreement to 1e-6 relative).
+    f_mm, cal_m, d = 5.85, 0.6, 0.5
+    h = 1e-4
+    lo, hi = (focal_breathing_scale(f_mm, cal_m, 1.0 / (d + s)) for s in (-h, h))
+    dlog = (np.log(hi) - np.log(lo)) / (2 * h)
+    assert abs(focus_sigma_rel(f_mm, d, 0.3) - abs(dlog) * 0.3) < 1e-6 * 0.3
+    assert focus_sigma_rel(f_mm, d, 0.0) == 0.0
+    with pytest.raises(InputError, match="focal length"):
+        focus_sigma_rel(0.0, d, 0.3)

@@ -63,6 +63,11 @@ def test_learn_then_depth_on_the_cli(bench_set: Path, tmp_path: Path) -> None:
     for x in res:
         b = x["stages"]["wide_breathing"]
         assert b["focus"] == "reported" and abs(b["scale"] - 0.99579) < 0.005, b
+        # ... and σ carries that report's own σ: f·σ_D/(1 − f·D) of the disparity, 0.3 D
+        # (FlowConfig.wide_focus_sigma_dioptre) at ~0.67 D: 0.126 % (to rounding of stages).
+        sp = x["stages"]["sigma_px"]
+        assert abs(sp["wide_focus"] / x["disparity_fixed_px"] - 0.00126) < 5e-5, sp
+        assert sp["total"] >= sp["wide_focus"]
 
 
 def test_depth_without_a_store_or_with_a_cold_capture_says_why(
