@@ -94,11 +94,12 @@ class FlowConfig:
     wide_focus_sigma_dioptre: float = 0.3
     #: A fix (on by default, see ``heating_gate``): the residual radial distortion of the rectified
     #: pair (thesis §3.2's non-disparity-axis fix, :mod:`~phonestereo.fixes.radial_residual`),
-    #: fitted to each face capture's whole-view matches and taken out of the faces' and, pooled,
-    #: the ROI's disparities. On because a factory's even-order lens model leaves it on every odd
-    #: lens; together with the face chart's grid as the ruler (``IpdMode.chart``) the 20 random
-    #: modules' medians fall by 30 % (p90 ≤ 2.5 % on 20 of 20). Alone, with the IPD ruler, it
-    #: uncovers that ruler's bias (random-1015 0.37 → 0.79 %; docs/module-random.md, session 11).
+    #: fitted to each face capture's whole-view matches and, pooled over the learning captures,
+    #: taken out of the faces' and the ROI's disparities. On because a factory's even-order lens
+    #: model leaves it on every odd lens; together with the face chart's grid as the ruler
+    #: (``IpdMode.chart``) the 20 random modules' medians fall by 30 % (p90 ≤ 2.5 % on 20 of
+    #: 20). Alone, with the IPD ruler, it uncovers that ruler's bias (random-1015 0.37 →
+    #: 0.79 %; docs/module-random.md, sessions 11 and 14).
     radial_residual: bool = True
     #: Keypoints of the face captures' W-T scale fit, which runs over the whole view the tele shares
     #: with the wide (not the faces' box): the scale's lever is the view's height.
@@ -180,8 +181,8 @@ def refer_to_pooled_radial(obs: np.ndarray, pooled: RadialResidualFix | None) ->
     ``radial_px``) with the pooled fit's taken out instead (thesis §3.2), in place.
 
     The application takes the pooled fit out of a ROI, so the faces must carry the same one:
-    one capture's cubic, fitted to the e of its ~100–200 matches, moves its faces by up to
-    0.2 px, and the learned correction carried that to every chart. Over the 28 bench sets
+    one capture's cubic, fitted to the e of its 100–700 matches, moved its faces by up to
+    0.23 px, and the learned correction carried that to every chart. Over the 28 bench sets
     the sets' mean errors' rms falls 0.386 → 0.304 % (random modules) and 0.232 → 0.180 %
     (``folded-x3`` 0–7); random-1004 +1.07 → +0.14 % (docs/module-random.md, session 14).
     Observations without ``radial_px`` (stores before schema 5) are left as learned.

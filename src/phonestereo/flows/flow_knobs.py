@@ -120,8 +120,9 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "bool",
         "Take the rectified pair's residual radial distortion out of every disparity (thesis "
         "§3.2's non-disparity-axis fix, fixes/radial_residual.py): P(r) about the tele's "
-        "principal point, fitted to each face capture's whole-view matches' e, corrects its "
-        "faces; pooled over the learning captures, the ROI's matches before its W-T scale.",
+        "principal point, fitted to each face capture's whole-view matches' e and pooled over "
+        "the learning captures, corrects the faces and the ROI's matches (before its W-T "
+        "scale) alike (session 14: each face on its own capture's fit scattered).",
         "On: the factory's even-order lens model leaves this residual on an odd lens. With the "
         "face chart's grid as the ruler (learn --face-pitch-mm) the 20 random modules' "
         "medians fall by 30 % (0.55 → 0.38 % on average, p90 ≤ 2.5 % on 20 of 20); alone, "
