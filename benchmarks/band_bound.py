@@ -3,7 +3,9 @@
 A set's errors are its common offset c_i ~ N(0, c²), shared by its captures, plus per-capture
 scatter N(0, s²). With an honest σ = √(c² + s²) the fraction of sets whose within-σ lands in
 the band depends only on c/s; this prints it (and the best single scale k·σ) for 18 captures a
-set. docs/module-random.md, session 14: 16 of 20 needs c/s ≤ ~0.9.
+set (the model: ``phonestereo.evaluation.band_bound``; asserted by
+tests/evaluation/test_band_bound.py). docs/module-random.md, session 14: 16 of 20 needs
+c/s ≤ ~0.9.
 
 Run: ``.venv/bin/python benchmarks/band_bound.py [--sets N] [--captures K]`` (~10 s).
 """
@@ -14,14 +16,7 @@ import argparse
 
 import numpy as np
 
-
-def band_fraction(ratio: float, k: float, sets: int, captures: int, seed: int = 0) -> float:
-    """Fraction of simulated sets with within-σ in [50 %, 90 %] for c/s = ``ratio``, σ scaled
-    by ``k``."""
-    rng = np.random.default_rng(seed)
-    e = ratio * rng.standard_normal((sets, 1)) + rng.standard_normal((sets, captures))
-    w = (np.abs(e) <= k * np.hypot(ratio, 1.0)).mean(axis=1)
-    return float(((w >= 0.5) & (w <= 0.9)).mean())
+from phonestereo.evaluation.band_bound import band_fraction
 
 
 def main() -> None:
@@ -32,9 +27,9 @@ def main() -> None:
     print("c/s    honest σ    best k·σ")
     for r in (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0):
         ks = np.linspace(0.5, 2.0, 31)
-        fs = [band_fraction(r, k, args.sets, args.captures) for k in ks]
+        fs = [band_fraction(r, k, sets=args.sets, captures=args.captures) for k in ks]
         i = int(np.argmax(fs))
-        print(f"{r:4.2f}   {band_fraction(r, 1.0, args.sets, args.captures):6.2f}"
+        print(f"{r:4.2f}   {band_fraction(r, sets=args.sets, captures=args.captures):6.2f}"
               f"      {fs[i]:.2f} (k = {ks[i]:.2f})")
 
 
