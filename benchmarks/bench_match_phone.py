@@ -36,7 +36,13 @@ def main() -> int:
         )
     n100 = sum(r["matches"] >= 100 for r in rows)
     z = [r["rms_z"] for r in rows if np.isfinite(r["rms_z"])]
-    print(f"≥ 100 matches on {n100} of {len(rows)} pairs; RMS z median {np.median(z):.2f}")
+    # pooled over every paired match of the 16 pairs (each pair weighted by its pairs)
+    w = np.array([r["paired"] for r in rows if np.isfinite(r["rms_z"])], dtype=np.float64)
+    pooled = float(np.sqrt(np.sum(w * np.square(z)) / np.sum(w)))
+    print(
+        f"≥ 100 matches on {n100} of {len(rows)} pairs; RMS z median {np.median(z):.2f}, "
+        f"pooled over the {int(w.sum())} paired matches {pooled:.2f}"
+    )
     return 0
 
 
