@@ -18,7 +18,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, flag, progress_bar, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -142,9 +142,9 @@ def study(
     ] = "analytic",
     quick: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--quick",
-            help="Smaller bench (analytic: 3 distances, a 5x4 point grid; flow: 5 captures).",
+            "Smaller bench (analytic: 3 distances, a 5x4 point grid; flow: 5 captures).",
         ),
     ] = False,
     metric: Annotated[
@@ -152,9 +152,9 @@ def study(
     ] = "median_rel_err",
     independent_phones: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--independent-phones",
-            help="A new simulated phone (factory noise, hand shake) per sample; default: one "
+            "A new simulated phone (factory noise, hand shake) per sample; default: one "
             "phone for all samples (common random numbers: the spread is the tolerances').",
         ),
     ] = False,

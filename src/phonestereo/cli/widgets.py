@@ -24,10 +24,16 @@ from rich.progress import (
 from rich.table import Table
 
 
+def flag(name: str, help: str) -> Any:
+    """A one-way boolean flag ``name`` (e.g. ``"--quick"``): off unless given, and no
+    ``--no-...`` form. Use as ``quick: Annotated[bool, flag("--quick", "...")] = False``."""
+    return typer.Option(name, help=help)
+
+
 def json_option(help: str = "Print the summary as JSON.") -> Any:
     """The ``--json`` flag with a command's own ``help``: print the result as JSON (for scripts)
     instead of tables. Use as ``as_json: Annotated[bool, json_option("...")] = False``."""
-    return typer.Option("--json", help=help)
+    return flag("--json", help)
 
 
 def overlay_option(what: str) -> Any:
