@@ -15,6 +15,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from phonestereo.io.importers.labels import CaptureLabels
+
 FORMAT_SESSION = "phonestereo-android-session"
 FORMAT_CAPTURE = "phonestereo-android-capture"
 POSE_REFERENCES = {0: "PRIMARY_CAMERA", 1: "GYROSCOPE", 2: "UNDEFINED", 3: "AUTOMOTIVE"}
@@ -173,19 +175,11 @@ class AndroidResult(BaseModel):
         return None if v is None else _rect(v)
 
 
-class AndroidCapture(BaseModel):
+class AndroidCapture(CaptureLabels):
     """``captures/<name>.json``: one capture's results, accelerometer and app-level labels."""
 
     model_config = _STRICT
 
     format: Literal["phonestereo-android-capture"]
-    version: Literal[1]
-    id: str = Field(min_length=1)
-    kind: Literal["face", "verification", "scene", "calibration"]
     accelerometer: tuple[float, float, float] | None = None
-    orientation: str | None = None
-    focus_group: str | None = None
-    focus_attempt: int | None = Field(None, ge=0)
-    temperature_c: float | None = None
-    roi: tuple[int, int, int, int] | None = None
     cameras: dict[str, AndroidResult]

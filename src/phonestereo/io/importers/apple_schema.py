@@ -15,6 +15,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from phonestereo.io.importers.labels import CaptureLabels
+
 FORMAT_SESSION = "phonestereo-apple-session"
 FORMAT_CAPTURE = "phonestereo-apple-capture"
 _STRICT = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
@@ -110,19 +112,11 @@ class AppleShot(BaseModel):
     lensPosition: float | None = Field(None, ge=0, le=1)
 
 
-class AppleCapture(BaseModel):
+class AppleCapture(CaptureLabels):
     """``captures/<name>.json``."""
 
     model_config = _STRICT
 
     format: Literal["phonestereo-apple-capture"]
-    version: Literal[1]
-    id: str = Field(min_length=1)
-    kind: Literal["face", "verification", "scene", "calibration"]
     gravity: tuple[float, float, float] | None = None
-    orientation: str | None = None
-    focus_group: str | None = None
-    focus_attempt: int | None = Field(None, ge=0)
-    temperature_c: float | None = None
-    roi: tuple[int, int, int, int] | None = None
     cameras: dict[str, AppleShot]
