@@ -1,5 +1,6 @@
-"""The app-level labels every phone dump's capture file carries (docs/import-android.md,
-docs/import-apple.md): what the capture shows and how it was shot, as the capture app tagged it.
+"""What the phone dumps' schemas share (docs/import-android.md, docs/import-apple.md): the
+app-level labels every capture file carries (what the capture shows and how it was shot, as the
+capture app tagged it), and the way a field's raw JSON value is checked.
 
 The platform schemas (:mod:`.android_schema`, :mod:`.apple_schema`) derive their capture models
 from :class:`CaptureLabels` and add their own format tag, motion sensor and per-camera results.
@@ -7,9 +8,17 @@ from :class:`CaptureLabels` and add their own format tag, motion sensor and per-
 
 from __future__ import annotations
 
-from typing import Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+
+
+def before(check: Callable[[Any], Any], *, optional: bool = False) -> BeforeValidator:
+    """A field's check on its raw JSON value, for ``Annotated[type, before(check)]``: ``check``
+    returns the value to validate as ``type`` or raises ValueError saying what is wrong (None
+    is passed through unchecked when ``optional``)."""
+    return BeforeValidator(lambda v: None if optional and v is None else check(v))
 
 
 class CaptureLabels(BaseModel):
