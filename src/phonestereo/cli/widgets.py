@@ -8,6 +8,7 @@ reads the same everywhere and one progress bar looks the same everywhere.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -44,6 +45,9 @@ def overlay_option(what: str) -> Any:
 
 #: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
 JSON_SUMMARY = Annotated[bool, json_option()]
+
+#: ``--out``: the output folder of a resumable run (a rerun with the same folder resumes it).
+RESUMABLE_OUT = Annotated[Path, typer.Option("--out", help="Output folder (rerun to resume).")]
 
 
 def error_exit(exc: Exception) -> typer.Exit:
