@@ -16,7 +16,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.scaleout import SchedulerOpt, WorkersOpt, _bar
-from phonestereo.cli.widgets import error_exit, json_option, track
+from phonestereo.cli.widgets import RESUMABLE_OUT, error_exit, flag, json_option, track
 from phonestereo.errors import InputError
 from phonestereo.evaluation.module_bench import parse_seeds, run_module_bench
 from phonestereo.evaluation.runner import check_address, dask_client
@@ -36,14 +36,12 @@ def _pct(v: float | None) -> str:
 @bench_app.command("modules")
 def bench_modules(
     seeds: Annotated[str, typer.Option("--seeds", help="Module seeds: A-B, N or a list.")],
-    out: Annotated[Path, typer.Option("--out", help="Output folder (rerun to resume).")] = Path(
-        "bench_modules"
-    ),
+    out: RESUMABLE_OUT = Path("bench_modules"),
     ranges: Annotated[
         Path | None, typer.Option("--ranges", help="JSON overriding the random-module ranges.")
     ] = None,
     keep_images: Annotated[
-        bool, typer.Option("--keep-images", help="Keep each module's rendered images.")
+        bool, flag("--keep-images", "Keep each module's rendered images.")
     ] = False,
     scheduler: SchedulerOpt = None,
     workers: WorkersOpt = 2,

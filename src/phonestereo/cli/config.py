@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit
+from phonestereo.cli.widgets import error_exit, flag
 from phonestereo.errors import InputError
 from phonestereo.flows.config_file import flow_config_json, flow_config_schema, load_flow_config
 
@@ -29,10 +29,7 @@ def show(
         ),
     ] = None,
     schema: Annotated[
-        bool,
-        typer.Option(
-            "--schema", help="Print the JSON schema: every knob's unit, meaning and default."
-        ),
+        bool, flag("--schema", "Print the JSON schema: every knob's unit, meaning and default.")
     ] = False,
 ) -> None:
     """Print the flow configuration as JSON: the defaults, or a --config file's effective

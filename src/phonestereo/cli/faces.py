@@ -10,7 +10,7 @@ import numpy as np
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, json_option, overlay_option
+from phonestereo.cli.widgets import error_exit, flag, json_option, overlay_option
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import MediaPipeBackend, read_color, read_openface_csv
 from phonestereo.features.landmarks.base import FaceResult
@@ -49,13 +49,12 @@ def faces(
             help="Use landmarks OpenFace 2.0 wrote for IMAGE (its CSV) instead of MediaPipe.",
         ),
     ] = None,
-    landmarks: Annotated[
-        bool, typer.Option("--landmarks", help="With --json, include every landmark.")
-    ] = False,
+    landmarks: Annotated[bool, flag("--landmarks", "With --json, include every landmark.")] = False,
     any_orientation: Annotated[
         bool,
-        typer.Option(
-            "--any-orientation", help="Also search the image turned by 90°, 180°, 270° (4× time)."
+        flag(
+            "--any-orientation",
+            "Also search the image turned by 90°, 180°, 270° (4× time).",
         ),
     ] = False,
 ) -> None:

@@ -6,6 +6,7 @@ written all-or-nothing and the summary says what was converted and how.
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 from typing import Annotated, Any
@@ -56,30 +57,35 @@ def _run(fn: Any, *args: Any, **kwargs: Any) -> Any:
         raise error_exit(exc) from exc
 
 
-@import_app.command("android")
-def import_android_command(
-    dump: Annotated[Path, _DUMP],
-    out: Annotated[Path, _OUT],
-    as_json: JSON_SUMMARY = False,
-) -> None:
+def _dump_command(platform: str, doc: str) -> None:
+    """Register ``import PLATFORM DUMP --out OUT``: the dump importer
+    ``phonestereo.io.importers.PLATFORM.import_PLATFORM`` with ``doc`` as its help."""
+
+    def command(
+        dump: Annotated[Path, _DUMP],
+        out: Annotated[Path, _OUT],
+        as_json: JSON_SUMMARY = False,
+    ) -> None:
+        module = importlib.import_module(f"phonestereo.io.importers.{platform}")
+        _report(_run(getattr(module, f"import_{platform}"), dump, out), as_json)
+
+    command.__name__ = f"import_{platform}_command"
+    command.__doc__ = doc
+    import_app.command(platform)(command)
+
+
+_dump_command(
+    "android",
     """Import an Android Camera2 dump (docs/import-android.md).
 
     Converts each physical camera's CameraCharacteristics (intrinsics, distortion, pose) into
     calibration.json and each capture's CaptureResult + accelerometer into manifest.json.
 
     Example: phonestereo import android phone_dump --out runs/phone_set
-    """
-    from phonestereo.io.importers.android import import_android
-
-    _report(_run(import_android, dump, out), as_json)
-
-
-@import_app.command("apple")
-def import_apple_command(
-    dump: Annotated[Path, _DUMP],
-    out: Annotated[Path, _OUT],
-    as_json: JSON_SUMMARY = False,
-) -> None:
+    """,
+)
+_dump_command(
+    "apple",
     """Import an Apple AVFoundation dump (docs/import-apple.md).
 
     Converts each camera's AVCameraCalibrationData into calibration.json (the distortion
@@ -87,10 +93,8 @@ def import_apple_command(
     manifest.json.
 
     Example: phonestereo import apple iphone_dump --out runs/iphone_set
-    """
-    from phonestereo.io.importers.apple import import_apple
-
-    _report(_run(import_apple, dump, out), as_json)
+    """,
+)
 
 
 @import_app.command("exif")

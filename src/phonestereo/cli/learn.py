@@ -15,7 +15,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, flag, progress_bar, track
 from phonestereo.errors import InputError, StoreError
 from phonestereo.flows.config_file import load_flow_config
 from phonestereo.flows.learning import IpdMode, LearningResult
@@ -59,17 +59,17 @@ def learn(
     ] = 325.0,
     population: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--population",
-            help="Real faces of unknown IPD: use the population prior (thesis §3.6) instead.",
+            "Real faces of unknown IPD: use the population prior (thesis §3.6) instead.",
         ),
     ] = False,
     config: CONFIG_OPTION = None,
     new_context: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--new-context",
-            help="The store was learned under another calibration or --config: keep these "
+            "The store was learned under another calibration or --config: keep these "
             "observations as a separate context in the same file instead of refusing.",
         ),
     ] = False,

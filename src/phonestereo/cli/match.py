@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, figure_table, json_option
+from phonestereo.cli.widgets import error_exit, figure_table, flag, json_option
 from phonestereo.errors import InputError
 from phonestereo.features.keypoints import DETECTORS
 from phonestereo.features.match_input import parse_roi
@@ -101,7 +101,7 @@ def match(
         Path | None, typer.Option(help="calibration.json: rectify the raw pair first.")
     ] = None,
     rectified: Annotated[
-        bool, typer.Option("--rectified", help="The pair is already rectified (disparity on x).")
+        bool, flag("--rectified", "The pair is already rectified (disparity on x).")
     ] = False,
     mode: Annotated[
         str, typer.Option(help=f"Rectification mode with --calibration: {', '.join(MODES)}.")
@@ -116,7 +116,7 @@ def match(
         int | None, typer.Option(help="Keypoints searched at most (default 2000; 400 with --fast).")
     ] = None,
     fast: Annotated[
-        bool, typer.Option("--fast", help="Speed preset: fewer keypoints, translation-only fit.")
+        bool, flag("--fast", "Speed preset: fewer keypoints, translation-only fit.")
     ] = False,
     as_json: Annotated[bool, json_option("Print the matches as JSON.")] = False,
 ) -> None:

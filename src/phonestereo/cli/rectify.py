@@ -12,7 +12,7 @@ from rich.console import Console
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import require_output_folder
-from phonestereo.cli.widgets import error_exit, figure_table, json_option
+from phonestereo.cli.widgets import error_exit, figure_table, flag, json_option
 from phonestereo.errors import InputError
 from phonestereo.io import load_calibration, read_gray, write_image
 from phonestereo.rectification import MODES, Rectification, RectifyOptions, check_mode
@@ -81,9 +81,7 @@ def rectify(
     calibration: Annotated[Path, typer.Option(help="calibration.json of the module.")],
     mode: Annotated[str, typer.Option(help=f"Rectification mode: {', '.join(MODES)}.")],
     out: Annotated[Path, typer.Option(help="Output folder (created).")],
-    force: Annotated[
-        bool, typer.Option("--force", help="Overwrite earlier rectified images in --out.")
-    ] = False,
+    force: Annotated[bool, flag("--force", "Overwrite earlier rectified images in --out.")] = False,
     resolution: Annotated[
         str, typer.Option(help="Rectified focal length: 'wide' (tele downscaled) or 'tele'.")
     ] = "wide",

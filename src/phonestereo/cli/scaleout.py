@@ -18,7 +18,14 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, progress_bar, track
+from phonestereo.cli.widgets import (
+    JSON_SUMMARY,
+    RESUMABLE_OUT,
+    error_exit,
+    flag,
+    progress_bar,
+    track,
+)
 from phonestereo.errors import InputError
 from phonestereo.evaluation.batch import (
     COMMANDS,
@@ -53,7 +60,7 @@ def _bar(console: Console, what: str, quiet: bool) -> Progress:
 def batch(
     command: Annotated[str, typer.Argument(help=f"One of: {', '.join(COMMANDS)}.")],
     inputs: Annotated[str, typer.Option("--inputs", help="Quoted glob of capture-set folders.")],
-    out: Annotated[Path, typer.Option("--out", help="Output folder (rerun to resume).")],
+    out: RESUMABLE_OUT,
     param: Annotated[
         list[str] | None,
         typer.Option("--param", help="Command parameter KEY=VALUE (repeatable)."),
@@ -135,16 +142,16 @@ def study(
         Path, typer.Option("--tolerances", help="Tolerances file (JSON, or YAML with PyYAML).")
     ],
     samples: Annotated[int, typer.Option("--samples", help="Number of Monte Carlo samples.")],
-    out: Annotated[Path, typer.Option("--out", help="Output folder (rerun to resume).")],
+    out: RESUMABLE_OUT,
     seed: Annotated[int, typer.Option("--seed", help="Study seed (reproducible).")] = 0,
     bench: Annotated[
         str, typer.Option("--bench", help="Per-sample bench: analytic | flow (not yet).")
     ] = "analytic",
     quick: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--quick",
-            help="Smaller bench (analytic: 3 distances, a 5x4 point grid; flow: 5 captures).",
+            "Smaller bench (analytic: 3 distances, a 5x4 point grid; flow: 5 captures).",
         ),
     ] = False,
     metric: Annotated[
@@ -152,9 +159,9 @@ def study(
     ] = "median_rel_err",
     independent_phones: Annotated[
         bool,
-        typer.Option(
+        flag(
             "--independent-phones",
-            help="A new simulated phone (factory noise, hand shake) per sample; default: one "
+            "A new simulated phone (factory noise, hand shake) per sample; default: one "
             "phone for all samples (common random numbers: the spread is the tolerances').",
         ),
     ] = False,

@@ -20,7 +20,7 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import prepare_capture_set_folder
-from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, json_option, progress_bar
+from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, flag, json_option, progress_bar
 from phonestereo.errors import InputError
 from phonestereo.sim.module import EFFECT_NAMES, ModuleSpec, list_presets, load_module
 from phonestereo.sim.scenarios import SCENARIOS, plan_scenario
@@ -74,9 +74,9 @@ def simulate_command(
         str, typer.Option("--module", "-m", help="Preset name or path of a module JSON file.")
     ] = "folded-x3",
     seed: Annotated[int, typer.Option("--seed", help="Random seed (same seed, same bytes).")] = 0,
-    quick: Annotated[bool, typer.Option("--quick", help="A small version (for tests).")] = False,
+    quick: Annotated[bool, flag("--quick", "A small version (for tests).")] = False,
     no_images: Annotated[
-        bool, typer.Option("--no-images", help="Write the JSON files only (no rendering).")
+        bool, flag("--no-images", "Write the JSON files only (no rendering).")
     ] = False,
     export: Annotated[
         list[str] | None,
@@ -88,8 +88,7 @@ def simulate_command(
     ] = None,
     as_json: JSON_SUMMARY = False,
     force: Annotated[
-        bool,
-        typer.Option("--force", help="Replace an earlier capture set in OUT (its files go first)."),
+        bool, flag("--force", "Replace an earlier capture set in OUT (its files go first).")
     ] = False,
 ) -> None:
     """Simulate a scenario of the virtual module and write its capture set.

@@ -8,6 +8,7 @@ reads the same everywhere and one progress bar looks the same everywhere.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -24,10 +25,16 @@ from rich.progress import (
 from rich.table import Table
 
 
+def flag(name: str, help: str) -> Any:
+    """A one-way boolean flag ``name`` (e.g. ``"--quick"``): off unless given, and no
+    ``--no-...`` form. Use as ``quick: Annotated[bool, flag("--quick", "...")] = False``."""
+    return typer.Option(name, help=help)
+
+
 def json_option(help: str = "Print the summary as JSON.") -> Any:
     """The ``--json`` flag with a command's own ``help``: print the result as JSON (for scripts)
     instead of tables. Use as ``as_json: Annotated[bool, json_option("...")] = False``."""
-    return typer.Option("--json", help=help)
+    return flag("--json", help)
 
 
 def overlay_option(what: str) -> Any:
@@ -38,6 +45,9 @@ def overlay_option(what: str) -> Any:
 
 #: ``--json``: print the command's summary as JSON (for scripts) instead of tables.
 JSON_SUMMARY = Annotated[bool, json_option()]
+
+#: ``--out``: the output folder of a resumable run (a rerun with the same folder resumes it).
+RESUMABLE_OUT = Annotated[Path, typer.Option("--out", help="Output folder (rerun to resume).")]
 
 
 def error_exit(exc: Exception) -> typer.Exit:

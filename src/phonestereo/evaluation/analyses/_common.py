@@ -24,6 +24,7 @@ from phonestereo.rectification import Rectification
 F64 = np.ndarray
 T = TypeVar("T")
 P = ParamSpec("P")
+S = TypeVar("S")  # the opened set an analysis body takes
 
 
 def save_figure(fig: Figure, path: Path) -> Path:
@@ -109,6 +110,31 @@ def open_canonical(capture_set: str | Path | CaptureSet) -> OpenedSet:
     return OpenedSet(t0, cs, rig, Rectification.from_rig(rig, "canonical"))
 
 
+class VerificationSet(NamedTuple):
+    """A capture set opened for an analysis of its 'verification' captures in every
+    rectification mode (:func:`open_verification`)."""
+
+    #: ``time.perf_counter()`` at the start, for :func:`seconds_since`.
+    t0: float
+    #: The capture set, loaded and validated.
+    cs: CaptureSet
+    #: Its calibration's rig.
+    rig: Rig
+    #: Its 'verification' captures (at least one).
+    caps: list[CaptureEntry]
+
+
+def open_verification(
+    capture_set: str | Path | CaptureSet, analysis: str, needs: str
+) -> VerificationSet:
+    """The prologue of an analysis over a set's 'verification' captures: the clock at the start,
+    the set and its rig (:func:`open_set`), and its 'verification' captures (InputError naming
+    what ``analysis`` ``needs`` when there are none, :func:`captures_of_kind`)."""
+    t0 = time.perf_counter()
+    cs, rig = open_set(capture_set)
+    return VerificationSet(t0, cs, rig, captures_of_kind(cs, "verification", analysis, needs))
+
+
 _RAISES = """
 
     Raises
@@ -117,31 +143,29 @@ _RAISES = """
         An invalid set, or one {lacking}.
     """
 
-#: An analysis body: the opened set, then its own keyword arguments.
-Body = Callable[Concatenate[OpenedSet, P], T]
+#: An analysis body: the opened set (``S``), then its own keyword arguments.
+Body = Callable[Concatenate[S, P], T]
 #: The public analysis: a capture-set folder or :class:`CaptureSet`, then the same arguments.
 Analysis = Callable[Concatenate[str | Path | CaptureSet, P], T]
 
 
-def canonical_analysis(lacking: str) -> Callable[[Body[P, T]], Analysis[P, T]]:
-    """Decorator: the public ``analyze_*(capture_set, ...)`` of a canonical-mode analysis from
-    its body ``analyze_*(opened, ...)``, which takes the set :func:`open_canonical` opened.
+def _opened_by(
+    open_: Callable[[str | Path | CaptureSet], S], lacking: str
+) -> Callable[[Body[S, P, T]], Analysis[P, T]]:
+    """Decorator: the public ``analyze_*(capture_set, ...)`` from its body ``analyze_*(opened,
+    ...)``: it opens ``capture_set`` with ``open_`` and passes the body's other arguments on;
+    help() shows ``capture_set`` first, and the docstring is the body's with the shared Raises
+    section (an invalid set, or one ``lacking``)."""
 
-    The public function opens ``capture_set`` (a folder, or a loaded :class:`CaptureSet`) and
-    passes the body's other arguments on; its docstring is the body's with the Raises section
-    every analysis shares: an invalid set, or one ``lacking`` (e.g. "without a refocus stack
-    of verification captures"), raises :class:`~phonestereo.errors.InputError`.
-    """
-
-    def wrap(body: Body[P, T]) -> Analysis[P, T]:
+    def wrap(body: Body[S, P, T]) -> Analysis[P, T]:
         @functools.wraps(body)
         def analyze(
             capture_set: str | Path | CaptureSet, /, *args: P.args, **kwargs: P.kwargs
         ) -> T:
-            return body(open_canonical(capture_set), *args, **kwargs)
+            return body(open_(capture_set), *args, **kwargs)
 
         analyze.__doc__ = (body.__doc__ or "").rstrip() + _RAISES.format(lacking=lacking)
-        sig = inspect.signature(body)  # help() shows capture_set, not the body's OpenedSet
+        sig = inspect.signature(body)  # help() shows capture_set, not the body's opened set
         first, *rest = sig.parameters.values()
         analyze.__signature__ = sig.replace(  # type: ignore[attr-defined]
             parameters=[first.replace(name="capture_set", annotation="str | Path | CaptureSet",
@@ -150,6 +174,31 @@ def canonical_analysis(lacking: str) -> Callable[[Body[P, T]], Analysis[P, T]]:
         return analyze
 
     return wrap
+
+
+def canonical_analysis(lacking: str) -> Callable[[Body[OpenedSet, P, T]], Analysis[P, T]]:
+    """Decorator: the public ``analyze_*(capture_set, ...)`` of a canonical-mode analysis from
+    its body ``analyze_*(opened, ...)``, which takes the set :func:`open_canonical` opened.
+
+    The public function opens ``capture_set`` (a folder, or a loaded :class:`CaptureSet`) and
+    passes the body's other arguments on; its docstring is the body's with the Raises section
+    every analysis shares: an invalid set, or one ``lacking`` (e.g. "without a refocus stack
+    of verification captures"), raises :class:`~phonestereo.errors.InputError`.
+    """
+    return _opened_by(open_canonical, lacking)
+
+
+def verification_analysis(
+    analysis: str, needs: str
+) -> Callable[[Body[VerificationSet, P, T]], Analysis[P, T]]:
+    """Decorator like :func:`canonical_analysis` for an analysis of a set's 'verification'
+    captures in every rectification mode: the body takes the :class:`VerificationSet`
+    :func:`open_verification` opened; a set without 'verification' captures raises
+    :class:`~phonestereo.errors.InputError` naming what ``analysis`` ``needs``."""
+    return _opened_by(
+        lambda capture_set: open_verification(capture_set, analysis, needs),
+        "without 'verification' captures",
+    )
 
 
 def seconds_since(t0: float) -> float:
@@ -242,6 +291,7 @@ def run_table(
 __all__ = [
     "MIN_ATTEMPTS",
     "OpenedSet",
+    "VerificationSet",
     "canonical_analysis",
     "captures_of_kind",
     "image_axes",
@@ -251,9 +301,11 @@ __all__ = [
     "measure_each",
     "open_canonical",
     "open_set",
+    "open_verification",
     "refocus_stacks",
     "run_table",
     "save_figure",
     "seconds_since",
+    "verification_analysis",
     "write_output",
 ]

@@ -27,7 +27,6 @@ image before/after the fix), ``distortion_radial.png`` (Figure 3-7's three panel
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +36,12 @@ from matplotlib.figure import Figure
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
-    captures_of_kind,
+    VerificationSet,
     image_axes,
     label_axes,
     measure_each,
-    open_set,
     seconds_since,
+    verification_analysis,
     write_output,
 )
 from phonestereo.evaluation.analyses._common import save_figure as _save
@@ -108,18 +107,17 @@ def _calibration_compare(cs: CaptureSet) -> dict[str, Any] | None:
     return out
 
 
+@verification_analysis(
+    "distortion",
+    ">= 1 'verification' capture of one flat verification chart filling the tele (tripod, "
+    "heated), e.g. `phonestereo simulate refocus`; 'calibration' captures (9x6 chessboard) "
+    "add the even-vs-odd lens comparison",
+)
 def analyze_distortion(
-    capture_set: str | Path | CaptureSet, *, progress: Progress | None = None
+    opened: VerificationSet, *, progress: Progress | None = None
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Measure residual distortion through e; (JSON table, plot data)."""
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
-    caps = captures_of_kind(
-        cs, "verification", "distortion",
-        ">= 1 'verification' capture of one flat verification chart filling the tele (tripod, "
-        "heated), e.g. `phonestereo simulate refocus`; 'calibration' captures (9x6 chessboard) "
-        "add the even-vs-odd lens comparison",
-    )
+    t0, cs, rig, caps = opened
     rects = {mode: Rectification.from_rig(rig, mode) for mode in MODES}
     rect = rects[MODE]
     n_min = DEGREE + 3

@@ -22,7 +22,6 @@ corner over the image, before and after: Figure 3-10) and ``translation_e_by_dep
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -33,11 +32,11 @@ from matplotlib.figure import Figure
 from phonestereo.charts.verification import VerificationChart
 from phonestereo.evaluation.analyses import AnalysisOutput, Progress
 from phonestereo.evaluation.analyses._common import (
-    captures_of_kind,
+    VerificationSet,
     image_axes,
     measure_each,
-    open_set,
     seconds_since,
+    verification_analysis,
     write_output,
 )
 from phonestereo.evaluation.analyses._common import save_figure as _save
@@ -135,18 +134,17 @@ def _mode_row(rect: Rectification, p: dict[str, Any]) -> dict[str, Any]:
             "translation_from_e": tf.to_dict(), "median_depth_m": depth}
 
 
+@verification_analysis(
+    "translation",
+    ">= 1 'verification' capture showing two verification charts at two depths (a "
+    "10x8-square 18 mm chart near, the standard chart far; tripod), e.g. "
+    "`phonestereo simulate dual-depth`",
+)
 def analyze_translation(
-    capture_set: str | Path | CaptureSet, *, progress: Progress | None = None
+    opened: VerificationSet, *, progress: Progress | None = None
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Measure the depth dependence of e per rectification mode; (JSON table, plot data)."""
-    t0 = time.perf_counter()
-    cs, rig = open_set(capture_set)
-    caps = captures_of_kind(
-        cs, "verification", "translation",
-        ">= 1 'verification' capture showing two verification charts at two depths (a "
-        "10x8-square 18 mm chart near, the standard chart far; tripod), e.g. "
-        "`phonestereo simulate dual-depth`",
-    )
+    t0, cs, rig, caps = opened
     ms = measure_each(caps, lambda c: _measure(cs, c), progress)
     good = [m for m in ms if m["found"]]
     base: dict[str, Any] = {"analysis": "translation", "capture_set": str(cs.root),

@@ -11,9 +11,11 @@ in the pixel-array coordinates Camera2 reports them in.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+
+from phonestereo.io.importers.dump_schema import CaptureLabels, before
 
 FORMAT_SESSION = "phonestereo-android-session"
 FORMAT_CAPTURE = "phonestereo-android-capture"
@@ -45,6 +47,11 @@ def _numbers(value: Any, n: int, what: str) -> tuple[float, ...]:
     return tuple(out)
 
 
+def _numbers_of(n: int, what: str, *, optional: bool = False) -> BeforeValidator:
+    """A field's check: :func:`_numbers` of ``n`` numbers (``what``)."""
+    return before(lambda v: _numbers(v, n, what), optional=optional)
+
+
 def _rect(value: Any) -> tuple[int, int, int, int]:
     nums = _numbers(value, 4, "Rect [left, top, right, bottom] in pixels")
     if any(v != int(v) for v in nums) or nums[2] <= nums[0] or nums[3] <= nums[1]:
@@ -56,20 +63,28 @@ def _rect(value: Any) -> tuple[int, int, int, int]:
     return left, top, right, bottom
 
 
+#: A ``Rect`` field, checked by :func:`_rect`.
+_Rect = Annotated[tuple[int, int, int, int], before(_rect)]
+
+
 class AndroidCharacteristics(BaseModel):
     """One physical camera's ``CameraCharacteristics`` (keys under their Camera2 names)."""
 
     model_config = _STRICT
 
-    intrinsic_calibration: tuple[float, ...] = Field(alias="android.lens.intrinsicCalibration")
-    distortion: tuple[float, ...] | None = Field(None, alias="android.lens.distortion")
+    intrinsic_calibration: Annotated[
+        tuple[float, ...], _numbers_of(5, "[f_x, f_y, c_x, c_y, s]")
+    ] = Field(alias="android.lens.intrinsicCalibration")
+    distortion: Annotated[
+        tuple[float, ...] | None, _numbers_of(5, "[k1, k2, k3, p1, p2]", optional=True)
+    ] = Field(None, alias="android.lens.distortion")
     pose_rotation: tuple[float, ...] = Field(alias="android.lens.poseRotation")
-    pose_translation: tuple[float, ...] = Field(alias="android.lens.poseTranslation")
+    pose_translation: Annotated[
+        tuple[float, ...], _numbers_of(3, "optical-centre position (x, y, z) in metres")
+    ] = Field(alias="android.lens.poseTranslation")
     pose_reference: int = Field(alias="android.lens.poseReference")
-    active_array: tuple[int, int, int, int] = Field(alias="android.sensor.info.activeArraySize")
-    pre_correction_array: tuple[int, int, int, int] = Field(
-        alias="android.sensor.info.preCorrectionActiveArraySize"
-    )
+    active_array: _Rect = Field(alias="android.sensor.info.activeArraySize")
+    pre_correction_array: _Rect = Field(alias="android.sensor.info.preCorrectionActiveArraySize")
     sensor_orientation: Literal[0, 90, 180, 270] = Field(alias="android.sensor.orientation")
     facing: Literal[1] = Field(1, alias="android.lens.facing")
     minimum_focus_distance: float | None = Field(
@@ -91,16 +106,6 @@ class AndroidCharacteristics(BaseModel):
             raise ValueError(f"must be focal lengths in millimetres (0–100), got {v!r}")
         return tuple(float(x) for x in vals)
 
-    @field_validator("intrinsic_calibration", mode="before")
-    @classmethod
-    def _k(cls, v: Any) -> tuple[float, ...]:
-        return _numbers(v, 5, "[f_x, f_y, c_x, c_y, s]")
-
-    @field_validator("distortion", mode="before")
-    @classmethod
-    def _d(cls, v: Any) -> tuple[float, ...] | None:
-        return None if v is None else _numbers(v, 5, "[k1, k2, k3, p1, p2]")
-
     @field_validator("pose_rotation", mode="before")
     @classmethod
     def _q(cls, v: Any) -> tuple[float, ...]:
@@ -109,11 +114,6 @@ class AndroidCharacteristics(BaseModel):
         if abs(norm - 1.0) > 1e-3:
             raise ValueError(f"must be a unit quaternion (x, y, z, w), got |q| = {norm:.6g}")
         return tuple(c / norm for c in q)
-
-    @field_validator("pose_translation", mode="before")
-    @classmethod
-    def _t(cls, v: Any) -> tuple[float, ...]:
-        return _numbers(v, 3, "optical-centre position (x, y, z) in metres")
 
     @field_validator("pose_reference")
     @classmethod
@@ -126,11 +126,6 @@ class AndroidCharacteristics(BaseModel):
                 "the rig yourself instead (`phonestereo calibrate`) and give that calibration"
             )
         return v
-
-    @field_validator("active_array", "pre_correction_array", mode="before")
-    @classmethod
-    def _rects(cls, v: Any) -> tuple[int, int, int, int]:
-        return _rect(v)
 
 
 class AndroidSession(BaseModel):
@@ -162,30 +157,19 @@ class AndroidResult(BaseModel):
     sensor_timestamp: int = Field(alias="android.sensor.timestamp", ge=0)
     af_mode: int = Field(alias="android.control.afMode", ge=0, le=5)
     focus_distance: float | None = Field(None, alias="android.lens.focusDistance", ge=0)
-    crop_region: tuple[int, int, int, int] | None = Field(None, alias="android.scaler.cropRegion")
+    crop_region: Annotated[tuple[int, int, int, int] | None, before(_rect, optional=True)] = (
+        Field(None, alias="android.scaler.cropRegion")
+    )
     distortion_correction_mode: Literal[0, 1, 2] = Field(
         0, alias="android.distortionCorrection.mode"
     )
 
-    @field_validator("crop_region", mode="before")
-    @classmethod
-    def _crop(cls, v: Any) -> tuple[int, int, int, int] | None:
-        return None if v is None else _rect(v)
 
-
-class AndroidCapture(BaseModel):
+class AndroidCapture(CaptureLabels):
     """``captures/<name>.json``: one capture's results, accelerometer and app-level labels."""
 
     model_config = _STRICT
 
     format: Literal["phonestereo-android-capture"]
-    version: Literal[1]
-    id: str = Field(min_length=1)
-    kind: Literal["face", "verification", "scene", "calibration"]
     accelerometer: tuple[float, float, float] | None = None
-    orientation: str | None = None
-    focus_group: str | None = None
-    focus_attempt: int | None = Field(None, ge=0)
-    temperature_c: float | None = None
-    roi: tuple[int, int, int, int] | None = None
     cameras: dict[str, AndroidResult]

@@ -11,9 +11,11 @@ their flat column-major float lists, exactly as they lie in memory.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+
+from phonestereo.io.importers.dump_schema import CaptureLabels, before
 
 FORMAT_SESSION = "phonestereo-apple-session"
 FORMAT_CAPTURE = "phonestereo-apple-capture"
@@ -31,6 +33,22 @@ def _floats(value: Any, n: int | None, what: str) -> tuple[float, ...]:
         if not math.isfinite(v):
             raise ValueError(f"non-finite value {v!r} ({what}); re-export the dump")
     return tuple(float(v) for v in value)
+
+
+def _floats_of(n: int, what: str) -> BeforeValidator:
+    """A field's check: :func:`_floats` of ``n`` numbers (``what``)."""
+    return before(lambda v: _floats(v, n, what))
+
+
+def _lut(value: Any) -> tuple[float, ...]:
+    out = _floats(value, None, "Float magnifications at radii 0 … r_max")
+    if len(out) < 2:
+        raise ValueError(f"needs at least 2 values, got {len(out)}")
+    return out
+
+
+#: A distortion lookup table: >= 2 finite magnifications (:func:`_lut`).
+_Lut = Annotated[tuple[float, ...], before(_lut)]
 
 
 class Size(BaseModel):
@@ -54,31 +72,18 @@ class AppleCalibration(BaseModel):
 
     model_config = _STRICT
 
-    intrinsicMatrix: tuple[float, ...]
+    intrinsicMatrix: Annotated[
+        tuple[float, ...], _floats_of(9, "simd_float3x3, 9 numbers column-major")
+    ]
     intrinsicMatrixReferenceDimensions: Size
-    extrinsicMatrix: tuple[float, ...]
+    extrinsicMatrix: Annotated[
+        tuple[float, ...],
+        _floats_of(12, "matrix_float4x3, 12 numbers column-major: R's 3 columns, then t"),
+    ]
     pixelSize: float = Field(gt=0)
     lensDistortionCenter: Point
-    lensDistortionLookupTable: tuple[float, ...]
-    inverseLensDistortionLookupTable: tuple[float, ...]
-
-    @field_validator("intrinsicMatrix", mode="before")
-    @classmethod
-    def _k(cls, v: Any) -> tuple[float, ...]:
-        return _floats(v, 9, "simd_float3x3, 9 numbers column-major")
-
-    @field_validator("extrinsicMatrix", mode="before")
-    @classmethod
-    def _e(cls, v: Any) -> tuple[float, ...]:
-        return _floats(v, 12, "matrix_float4x3, 12 numbers column-major: R's 3 columns, then t")
-
-    @field_validator("lensDistortionLookupTable", "inverseLensDistortionLookupTable", mode="before")
-    @classmethod
-    def _lut(cls, v: Any) -> tuple[float, ...]:
-        out = _floats(v, None, "Float magnifications at radii 0 … r_max")
-        if len(out) < 2:
-            raise ValueError(f"needs at least 2 values, got {len(out)}")
-        return out
+    lensDistortionLookupTable: _Lut
+    inverseLensDistortionLookupTable: _Lut
 
 
 class AppleSession(BaseModel):
@@ -110,19 +115,11 @@ class AppleShot(BaseModel):
     lensPosition: float | None = Field(None, ge=0, le=1)
 
 
-class AppleCapture(BaseModel):
+class AppleCapture(CaptureLabels):
     """``captures/<name>.json``."""
 
     model_config = _STRICT
 
     format: Literal["phonestereo-apple-capture"]
-    version: Literal[1]
-    id: str = Field(min_length=1)
-    kind: Literal["face", "verification", "scene", "calibration"]
     gravity: tuple[float, float, float] | None = None
-    orientation: str | None = None
-    focus_group: str | None = None
-    focus_attempt: int | None = Field(None, ge=0)
-    temperature_c: float | None = None
-    roi: tuple[int, int, int, int] | None = None
     cameras: dict[str, AppleShot]
