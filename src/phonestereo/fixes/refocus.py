@@ -18,7 +18,7 @@ the flat-scene homography → residual distortion → scale method.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import cv2
@@ -90,10 +90,7 @@ class FocusVerdict:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready."""
-        return {
-            "sharpness": float(self.sharpness), "relative": float(self.relative),
-            "failed": self.failed, "reason": self.reason,
-        }
+        return asdict(self)
 
 
 def detect_focus_failures(

@@ -29,6 +29,7 @@ from scipy.interpolate import BSpline, RectBivariateSpline
 
 from phonestereo.errors import PhysicsError
 from phonestereo.geometry import Camera
+from phonestereo.geometry.checks import require_positive
 
 __all__ = [
     "coc_diameter_m",
@@ -43,15 +44,8 @@ __all__ = [
 F64 = NDArray[np.float64]
 
 
-def _positive(value: float, name: str) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0.0:
-        raise PhysicsError(f"{name} must be a finite positive number, got {v}")
-    return v
-
-
 def _focus(f_m: float, focus_m: float) -> tuple[float, float]:
-    f = _positive(f_m, "focal length f_m (metres)")
+    f = require_positive(f_m, "focal length f_m (metres)")
     s = float(focus_m)
     if np.isnan(s) or s <= f:
         raise PhysicsError(
@@ -122,7 +116,7 @@ def focal_px(f_m: float, focus_m: float, pixel_pitch_m: float) -> float:
     >>> round(focal_px(4.2e-3, 2.0, 2.8e-6), 2)
     1503.16
     """
-    pitch = _positive(pixel_pitch_m, "pixel_pitch_m (metres)")
+    pitch = require_positive(pixel_pitch_m, "pixel_pitch_m (metres)")
     return image_distance_m(f_m, focus_m) / pitch
 
 
@@ -157,7 +151,7 @@ def coc_diameter_m(f_m: float, f_number: float, focus_m: float, depth_m: Any) ->
     9.53
     """
     f, s = _focus(f_m, focus_m)
-    n = _positive(f_number, "f_number")
+    n = require_positive(f_number, "f_number")
     d = np.asarray(depth_m, dtype=np.float64)
     if np.any(np.isnan(d)) or np.any(d <= f):
         raise PhysicsError(f"object depths must exceed the focal length {f} m, got {depth_m}")
@@ -196,7 +190,7 @@ def defocus_sigma_px(
     >>> defocus_sigma_px(4.2e-3, 1.8, 2.0, 2.0, 2.8e-6)
     0.0
     """
-    pitch = _positive(pixel_pitch_m, "pixel_pitch_m (metres)")
+    pitch = require_positive(pixel_pitch_m, "pixel_pitch_m (metres)")
     return coc_diameter_m(f_m, f_number, focus_m, depth_m) / (4.0 * pitch)
 
 
@@ -212,8 +206,8 @@ def defocus_sigma_function(
     0.146
     """
     _focus(f_m, focus_m)
-    _positive(f_number, "f_number")
-    _positive(pixel_pitch_m, "pixel_pitch_m (metres)")
+    require_positive(f_number, "f_number")
+    require_positive(pixel_pitch_m, "pixel_pitch_m (metres)")
 
     def sigma(depth_m: float) -> float:
         return float(defocus_sigma_px(f_m, f_number, focus_m, depth_m, pixel_pitch_m))
