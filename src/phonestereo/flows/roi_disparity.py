@@ -296,7 +296,7 @@ def measure_roi(
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
     sources = (source_wide, pending.result())
     lw, rt, two_pass = coarse_window(sources, box, d_max, cfg, cboxes)
-    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center)
+    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center, partial=two_pass)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
     d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
