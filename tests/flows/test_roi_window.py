@@ -46,13 +46,18 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
     rt_coarse = rescale_tele(rt, scale, center) if scale != 1.0 else rt
     fw, ft = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg)
     whole_w, whole_t = rect.remap(w, t)  # Lanczos-4 everywhere
+    lo_d, hi_d = int(np.floor(d0)) - cfg.fine_range_px, int(np.ceil(d0)) + cfg.fine_range_px
+    x0, y0, x1, y1 = part = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
     if scale != 1.0:
+        # the fine part is the pre-scale of that part of the Lanczos-4 window, pixel for pixel
+        # (fine_window warps it from the tele's part alone, in two row bands)
+        part_t = rescale_tele(whole_t, scale, center, part)
+        assert np.array_equal(ft[y0:y1, x0:x1], part_t[y0:y1, x0:x1])
         whole_t = rescale_tele(whole_t, scale, center)
     # The matcher's crop for d0 ± fine_range_px and the row band, plus the blur's 12-px reach:
     # every pixel there is the whole-window remap's (fine_window's guard is 16 px).
     ty = max(cfg.match.row_tolerance, int(abs(e0)) + 2)
     reach = cfg.match.radius + ty + 3 + PREFILTER_MARGIN + 12
-    lo_d, hi_d = int(np.floor(d0)) - cfg.fine_range_px, int(np.ceil(d0)) + cfg.fine_range_px
     x, y, bw, bh = box
     sl = np.s_[y - reach : y + bh + reach, x - hi_d - reach : x + bw - lo_d + reach]
     assert np.array_equal(fw[sl], whole_w[sl])
@@ -64,7 +69,6 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
         diff = np.abs(ft[sl].astype(int) - whole_t[sl].astype(int))
         assert (diff > 0).mean() < 0.03 and diff.max() <= 12
     # outside the part the coarse (cubic, pre-scaled) pixels are left as they were
-    x0, y0, x1, y1 = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
     outside = np.ones((H, W), bool)
     outside[y0:y1, x0:x1] = False
     assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)

@@ -10,14 +10,16 @@ gives (issue #18: the window remap was ~35 % of ``measure_roi`` at 12 MP).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
+import cv2
 import numpy as np
 
-from phonestereo.features._threads import background
+from phonestereo.features._threads import background, run_split
 from phonestereo.features.subpixel import PREFILTER_MARGIN
-from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.tele_roi_scale import fixed_point_maps, scale_matrix
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
 __all__ = [
@@ -136,17 +138,25 @@ def fine_window(
         lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
         part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
 
-    def tele() -> Any:  # the tele's part, pre-scaled and pasted, on the helper thread
-        fine_t = sources[1].remap(DEFAULT_INTERPOLATION, part_t)
-        if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
-            src = rt.copy()
-            src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
-            fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
-        out = rt.copy()
-        out[y0:y1, x0:x1] = fine_t
-        return out
-
-    pending = background(tele)
+    pending = background(sources[1].remap, DEFAULT_INTERPOLATION, part_t)  # the tele's part
     lw = lw.copy()
     lw[y0:y1, x0:x1] = sources[0].remap(DEFAULT_INTERPOLATION, part_w)
-    return lw, pending.result()
+    out = rt.copy()
+    if scale == 1.0 or center is None:
+        out[y0:y1, x0:x1] = pending.result()
+        return lw, out
+    # pre-scale the fine tele into part_w: rescale_tele(part_t pasted into rt, box=part_w)'s
+    # pixels (its taps stay inside part_t), from part_t alone, in two row bands (one per thread)
+    fine_t = pending.result()
+    m = scale_matrix(scale, center, (x0, y0))
+    h = y1 - y0
+
+    def warp(bands: Sequence[tuple[int, int]]) -> None:
+        for a, b in bands:
+            xy, frac = fixed_point_maps(m, (0, a, x1 - x0, b), (part_t[0], part_t[1]))
+            out[y0 + a : y0 + b, x0:x1] = cv2.remap(
+                fine_t, xy, frac, cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT
+            )
+
+    run_split(warp, [(0, h // 2), (h // 2, h)], min_items=2)
+    return lw, out

@@ -29,12 +29,16 @@ _TILE_REACH = 8
 Box = tuple[int, int, int, int]
 
 
-def scale_matrix(scale: float, center: tuple[float, float]) -> NDArray[np.float32]:
+def scale_matrix(
+    scale: float, center: tuple[float, float], origin: tuple[int, int] = (0, 0)
+) -> NDArray[np.float32]:
     """The 2 × 3 inverse map (float32) of :func:`~phonestereo.flows.coarse.rescale_tele`:
-    output pixel q reads the tele at c + (q − c)/scale."""
+    output pixel q reads the tele at c + (q − c)/scale; with ``origin`` (x0, y0), that of its
+    ``box`` variant, whose output pixel (0, 0) is q = (x0, y0)."""
     k = 1.0 / scale
     cx, cy = center
-    return np.array([[k, 0, cx * (1 - k)], [0, k, cy * (1 - k)]], np.float32)
+    x0, y0 = origin
+    return np.array([[k, 0, cx * (1 - k) + k * x0], [0, k, cy * (1 - k) + k * y0]], np.float32)
 
 
 def fixed_point_maps(
