@@ -26,7 +26,8 @@ from phonestereo.flows.coarse import (
     tile_wt_scale,
 )
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.tele_roi_scale import coarse_reads, scaled_part
+from phonestereo.flows.tele_roi_lazy import LazyPair
+from phonestereo.flows.tele_roi_scale import coarse_reads, preimage, scaled_part
 
 Box = tuple[int, int, int, int]
 
@@ -125,6 +126,7 @@ def coarse_peak(
     cfg: RoiConfig,
     center: tuple[float, float] | None = None,
     partial: bool = False,
+    cover: LazyPair | None = None,
 ) -> CoarseChoice:
     """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
     used — or the last box's with the reason it cannot.
@@ -145,9 +147,14 @@ def coarse_peak(
     box's strip as it is tried, :mod:`~phonestereo.flows.tele_roi_scale`, the same pixels),
     the rest of the returned ``right`` keeping the uncorrected ones — for a caller that
     resamples the fine part again (:func:`~phonestereo.flows.roi_window.fine_window`).
+    ``cover``: ``lw`` and ``rt`` are its arrays, resampled where the first box is read; each
+    other box's parts (and the tele the pre-scale reads) are resampled before it is tried.
     """
     assert boxes, "no coarse box"
     b0 = boxes[0]
+    size = (rt.shape[1], rt.shape[0])
+    if cover is not None:
+        cover.cover_box(b0)
     tz, s = float("nan"), float("nan")
     p0: CoarsePeak | None = None
     maps: list[TileMaps] = []  # the tiles' ±8 px maps about p0: the tile test's first peak
@@ -162,10 +169,12 @@ def coarse_peak(
         fill = None
         if partial:
             rt_s = rt.copy()
-            size = (rt.shape[1], rt.shape[0])
 
             def fill(b: Box) -> None:
                 x0, y0, x1, y1 = part = coarse_reads(b, -2, d_max, cfg.coarse_rows, size)
+                if cover is not None:
+                    cover.cover_box(b)
+                    cover.cover_right(preimage(part, s, center, size))
                 rt_s[y0:y1, x0:x1] = scaled_part(rt, s, center, part)
         else:
             rt_s = rescale_tele(rt, s, center)
@@ -173,7 +182,8 @@ def coarse_peak(
         if not why:
             return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
         why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
-    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None)
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None,
+                                      before=None if cover is None else cover.cover_box)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
     if why_s:

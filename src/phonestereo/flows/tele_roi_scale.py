@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["coarse_reads", "fixed_point_maps", "scale_matrix", "scaled_part"]
+__all__ = ["coarse_reads", "fixed_point_maps", "preimage", "scale_matrix", "scaled_part"]
 
 #: ``cv2.warpAffine``'s coordinate bits (AB_BITS) and the interpolation tables' (INTER_BITS).
 _AB_BITS, _INTER_BITS = 10, 5
@@ -92,13 +92,28 @@ def scaled_part(right: Any, scale: float, center: tuple[float, float], box: Box)
 
 
 def coarse_reads(
-    box: Box, d_min: int, d_max: int, rows: int, size: tuple[int, int]
+    box: Box, d_min: int, d_max: int, rows: int, size: tuple[int, int], reach: int = _TILE_REACH
 ) -> tuple[int, int, int, int]:
     """(x0, y0, x1, y1) of the right window that the coarse step reads for the left box
     (x, y, w, h): the whole-box search strip (disparities d_min … d_max, ±``rows``) and the
-    tile tests about its peaks, inside a window of ``size`` (W, H)."""
+    tile tests about its peaks (``reach`` px beyond the strip: the default covers the ±3-px
+    tile test; the W-T scale's ±8-px tiles need 9), inside a window of ``size`` (W, H)."""
     x, y, w, h = box
     W, H = size
-    r = _TILE_REACH
+    r = reach
     return (max(x - d_max - r, 0), max(y - rows - r, 0),
             min(x + w - d_min + r, W), min(y + h + rows + r, H))
+
+
+def preimage(
+    part: tuple[int, int, int, int], scale: float, center: tuple[float, float],
+    size: tuple[int, int],
+) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1) of the tele window that the pre-scale of ``part`` reads (its cubic
+    taps and a pixel to spare), inside a window of ``size`` (W, H)."""
+    x0, y0, x1, y1 = part
+    c = np.array(center)
+    q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
+    lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
+    return (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), size[0]),
+            min(int(hi[1]), size[1]))
