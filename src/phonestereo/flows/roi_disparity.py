@@ -294,8 +294,9 @@ def measure_roi(
     pending = background(win.source, "tele", image_tele)
     source_wide = win.source("wide", image_wide)
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    # the left's coarse part here while the helper still blurs the tele (coarse_lazy)
+    lazy = coarse_lazy((source_wide, pending), box, d_max, cfg, cboxes[0], image_tele)
     sources = (source_wide, pending.result())
-    lazy = coarse_lazy(sources, box, d_max, cfg, cboxes[0])
     if lazy is None:
         lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     else:  # the coarse step reads the first box; the next ones are resampled if tried

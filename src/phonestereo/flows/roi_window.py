@@ -11,6 +11,7 @@ gives (issue #18: the window remap was ~35 % of ``measure_roi`` at 12 MP).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Future
 from typing import Any
 
 import cv2
@@ -106,17 +107,17 @@ def coarse_window(
 
 
 def coarse_lazy(
-    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
-    first_box: tuple[int, int, int, int],
+    sources: tuple[Source, Source | Future[Source]], box: tuple[int, int, int, int], d_max: int,
+    cfg: RoiConfig, first_box: tuple[int, int, int, int], tele_like: Any = None,
 ) -> LazyPair | None:
     """With two passes, the cubic pair resampled where the coarse step reads the coarse box
     ``first_box`` (x, y, w, h) only (:class:`~phonestereo.flows.tele_roi_lazy.LazyPair`,
-    which resamples the next boxes' parts when asked); None with one pass
-    (:func:`coarse_window`)."""
+    which resamples the next boxes' parts when asked; the tele source may still be pending
+    on the helper thread, ``tele_like`` its dtype); None with one pass (:func:`coarse_window`)."""
     H, W = sources[0].map_x.shape
     if not two_passes(box, d_max, cfg, (W, H)):
         return None
-    pair = LazyPair(sources, COARSE_INTERPOLATION, d_max, cfg.coarse_rows)
+    pair = LazyPair(sources, COARSE_INTERPOLATION, d_max, cfg.coarse_rows, tele_like)
     pair.cover_box(first_box)
     return pair
 

@@ -12,6 +12,7 @@ its own, so every pixel is the whole-window remap's; the rest stays zero (unread
 
 from __future__ import annotations
 
+from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
@@ -33,16 +34,26 @@ class LazyPair:
     filled in place as the coarse step asks for parts of it."""
 
     def __init__(
-        self, sources: tuple[Source, Source], interpolation: str, d_max: int, rows: int
+        self, sources: tuple[Source, Source | Future[Source]], interpolation: str, d_max: int,
+        rows: int, tele_like: Any = None,
     ) -> None:
+        """``sources[1]`` may be the helper thread's pending tele :class:`Source` (the left's
+        part is then resampled here while it is prepared); ``tele_like``: an array of the
+        tele's dtype and channels (default: the tele source's image)."""
         self.sources, self.interpolation = sources, interpolation
         self.d_max, self.rows = d_max, rows
         self.H, self.W = sources[0].map_x.shape
-        self.left, self.right = (self._empty(s) for s in sources)
+        self.left = self._empty(sources[0].image)
+        self.right = self._empty(self._source(1).image if tele_like is None else tele_like)
         self._done = (np.zeros((self.H, self.W), bool), np.zeros((self.H, self.W), bool))
 
-    def _empty(self, source: Source) -> Any:
-        return np.zeros((self.H, self.W, *source.image.shape[2:]), source.image.dtype)
+    def _empty(self, like: Any) -> Any:
+        like = np.asarray(like)
+        return np.zeros((self.H, self.W, *like.shape[2:]), like.dtype)
+
+    def _source(self, i: int) -> Source:
+        s = self.sources[i]
+        return s.result() if isinstance(s, Future) else s
 
     def _missing(self, i: int, part: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
         """The bounding box (x0, y0, x1, y1) of the pixels of ``part`` not yet resampled in
@@ -59,12 +70,13 @@ class LazyPair:
         x0, y0, x1, y1 = part
         if x1 <= x0 or y1 <= y0:
             return
-        (self.left, self.right)[i][y0:y1, x0:x1] = self.sources[i].remap(self.interpolation, part)
+        (self.left, self.right)[i][y0:y1, x0:x1] = self._source(i).remap(self.interpolation, part)
         self._done[i][y0:y1, x0:x1] = True
 
     def cover_box(self, box: Box) -> None:
         """Resample what the coarse step reads for the left box (x, y, w, h): the box in the
-        left, its strip and tiles in the right (the right's first rows on the helper)."""
+        left, its strip and tiles in the right (the right's first rows on the helper, queued
+        behind a pending tele source; the left here first)."""
         x, y, w, h = box
         lp = self._missing(0, (x, y, x + w, y + h))
         rp = self._missing(1, coarse_reads(box, -2, self.d_max, self.rows, (self.W, self.H),
