@@ -46,6 +46,8 @@ class LazyPair:
         self.left = self._empty(sources[0].image)
         self.right = self._empty(self._source(1).image if tele_like is None else tele_like)
         self._done = (np.zeros((self.H, self.W), bool), np.zeros((self.H, self.W), bool))
+        #: The parts resampled so far, per image (a part inside one of them needs no scan).
+        self._parts: tuple[list[Any], list[Any]] = ([], [])
 
     def _empty(self, like: Any) -> Any:
         like = np.asarray(like)
@@ -59,6 +61,8 @@ class LazyPair:
         """The bounding box (x0, y0, x1, y1) of the pixels of ``part`` not yet resampled in
         image i (empty: x1 ≤ x0)."""
         x0, y0, x1, y1 = part
+        if any(a <= x0 and b <= y0 and x1 <= c and y1 <= d for a, b, c, d in self._parts[i]):
+            return (x0, y0, x0, y0)
         todo = ~self._done[i][y0:y1, x0:x1]
         rows, cols = np.flatnonzero(todo.any(axis=1)), np.flatnonzero(todo.any(axis=0))
         if not len(rows):
@@ -72,6 +76,7 @@ class LazyPair:
             return
         (self.left, self.right)[i][y0:y1, x0:x1] = self._source(i).remap(self.interpolation, part)
         self._done[i][y0:y1, x0:x1] = True
+        self._parts[i].append(part)
 
     def cover_box(self, box: Box) -> None:
         """Resample what the coarse step reads for the left box (x, y, w, h): the box in the
@@ -84,7 +89,10 @@ class LazyPair:
         rx0, ry0, rx1, ry1 = rp
         n_left = max(lp[2] - lp[0], 0) * max(lp[3] - lp[1], 0)
         n_right = max(rx1 - rx0, 0) * max(ry1 - ry0, 0)
-        k = ry0 if rx1 <= rx0 else min(ry0 + round((n_right + n_left) / 2 / (rx1 - rx0)), ry1)
+        if not n_right:
+            self._fill(0, lp)
+            return
+        k = min(ry0 + round((n_right + n_left) / 2 / (rx1 - rx0)), ry1)
         top = background(self._fill, 1, (rx0, ry0, rx1, k))
         self._fill(0, lp)
         self._fill(1, (rx0, k, rx1, ry1))
