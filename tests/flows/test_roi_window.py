@@ -15,7 +15,9 @@ import pytest
 from phonestereo.features.subpixel import PREFILTER_MARGIN
 from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.roi_window import _fine_part, coarse_window, fine_window
+from phonestereo.flows.roi_window import _fine_part, coarse_lazy, coarse_window, fine_window
+from phonestereo.flows.tele_roi_lazy import RIGHT_REACH
+from phonestereo.flows.tele_roi_scale import coarse_reads
 from phonestereo.geometry import Camera, Rig, Transform
 from phonestereo.rectification import Rectification, RectifyOptions
 
@@ -46,13 +48,18 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
     rt_coarse = rescale_tele(rt, scale, center) if scale != 1.0 else rt
     fw, ft = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg)
     whole_w, whole_t = rect.remap(w, t)  # Lanczos-4 everywhere
+    lo_d, hi_d = int(np.floor(d0)) - cfg.fine_range_px, int(np.ceil(d0)) + cfg.fine_range_px
+    x0, y0, x1, y1 = part = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
     if scale != 1.0:
+        # the fine part is the pre-scale of that part of the Lanczos-4 window, pixel for pixel
+        # (fine_window warps it from the tele's part alone, in two row bands)
+        part_t = rescale_tele(whole_t, scale, center, part)
+        assert np.array_equal(ft[y0:y1, x0:x1], part_t[y0:y1, x0:x1])
         whole_t = rescale_tele(whole_t, scale, center)
     # The matcher's crop for d0 ± fine_range_px and the row band, plus the blur's 12-px reach:
     # every pixel there is the whole-window remap's (fine_window's guard is 16 px).
     ty = max(cfg.match.row_tolerance, int(abs(e0)) + 2)
     reach = cfg.match.radius + ty + 3 + PREFILTER_MARGIN + 12
-    lo_d, hi_d = int(np.floor(d0)) - cfg.fine_range_px, int(np.ceil(d0)) + cfg.fine_range_px
     x, y, bw, bh = box
     sl = np.s_[y - reach : y + bh + reach, x - hi_d - reach : x + bw - lo_d + reach]
     assert np.array_equal(fw[sl], whole_w[sl])
@@ -64,27 +71,38 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
         diff = np.abs(ft[sl].astype(int) - whole_t[sl].astype(int))
         assert (diff > 0).mean() < 0.03 and diff.max() <= 12
     # outside the part the coarse (cubic, pre-scaled) pixels are left as they were
-    x0, y0, x1, y1 = _fine_part(box, lo_d, hi_d, e0, cfg, (W, H))
     outside = np.ones((H, W), bool)
     outside[y0:y1, x0:x1] = False
     assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)
     assert np.array_equal(ft[outside], rt_coarse[outside])
 
 
-def test_the_coarse_left_is_resampled_where_the_coarse_step_reads_only() -> None:
-    # measure_roi hands coarse_window the coarse boxes: the left is resampled inside their
-    # bounding box only (the coarse step reads nothing else; the fine part is resampled again),
-    # the right in two row bands, one per thread; every pixel read is the whole remap's
+def test_the_coarse_pair_is_resampled_where_the_coarse_step_reads_only() -> None:
+    # measure_roi resamples the cubic pair where the first coarse box is read (the box in the
+    # left, its search strip and tiles in the right), the next boxes' parts when they are
+    # tried; every pixel read is the whole remap's, the rest zero
     rect, w, t = _setup()
     W, H = rect.wide_rect.size
     sources = rect.sources(w, t)
     box = (W // 3, H // 3, W // 3, H // 3)
-    boxes = ((W // 4, H // 4, W // 2, H // 2), box)
-    lw, rt, two_pass = coarse_window(sources, box, 40, RoiConfig(), boxes)
-    whole_l, whole_r, _ = coarse_window(sources, box, 40, RoiConfig())
-    assert two_pass and lw.shape == whole_l.shape
-    sl = np.s_[H // 4 : H // 4 + H // 2, W // 4 : W // 4 + W // 2]
-    assert np.array_equal(lw[sl], whole_l[sl]) and np.array_equal(rt, whole_r)
-    outside = np.ones((H, W), bool)
-    outside[sl] = False
-    assert not lw[outside].any()
+    first, second = (W // 4, H // 4, W // 2, H // 2), (W // 3, H // 5, W // 3, H // 2)
+    pair = coarse_lazy(sources, box, 40, RoiConfig(), first)
+    whole_l, whole_r, two_pass = coarse_window(sources, box, 40, RoiConfig())
+    assert pair is not None and two_pass and pair.left.shape == whole_l.shape
+
+    def check(boxes: list[tuple[int, int, int, int]]) -> None:
+        read_l, read_r = np.zeros((H, W), bool), np.zeros((H, W), bool)
+        for x, y, bw, bh in boxes:
+            read_l[y : y + bh, x : x + bw] = True
+            x0, y0, x1, y1 = coarse_reads((x, y, bw, bh), -2, 40, RoiConfig().coarse_rows,
+                                          (W, H), RIGHT_REACH)
+            read_r[y0:y1, x0:x1] = True
+        assert np.array_equal(pair.left[read_l], whole_l[read_l]) and not pair.left[~read_l].any()
+        assert np.array_equal(pair.right[read_r], whole_r[read_r])
+        assert not pair.right[~read_r].any() and read_r.mean() < 0.9
+
+    check([first])
+    pair.cover_box(second)
+    check([first, second])
+    pair.cover_right((0, 0, 10, 12))
+    assert np.array_equal(pair.right[:12, :10], whole_r[:12, :10])

@@ -41,17 +41,19 @@ from numpy.typing import NDArray
 from phonestereo.errors import InputError
 from phonestereo.features import match_filters as gf
 from phonestereo.features._threads import background
-from phonestereo.features.blur import (
-    equalise_pair,
-    gaussian_blur,
-    gaussian_kernel,
-    relative_blur,
-)
-from phonestereo.features.cfa import cfa_phase_contrast, shift_noise_factor, suppress_cfa
+from phonestereo.features.blur import equalise_pair, relative_blur
+from phonestereo.features.cfa import cfa_phase_contrast, suppress_cfa
 from phonestereo.features.crlb import match_sigma, noise_sigma
 from phonestereo.features.keypoints import detect_dog, detect_sift, dog_noise_gain
 from phonestereo.features.match_config import MatchConfig, MatchResult
-from phonestereo.features.match_fit import NoiseModel, Windows, first_fit, fit_windows, scaled
+from phonestereo.features.match_fit import (
+    NoiseModel,
+    Windows,
+    first_fit,
+    fit_windows,
+    scaled,
+    wide_prefilter,
+)
 from phonestereo.features.match_input import as_image, check_pair, crop_box, parse_roi
 from phonestereo.features.misfit import (
     correlation_factor,
@@ -213,18 +215,13 @@ def match_rectified(
     fit, wide = first_fit(Windows(lc, coef, xy[idx], s.d0[idx], s.e0[idx], r, cfg.sigma_w),
                           models, cfg, corr)
     if wide:  # compression-limited: a larger window, the quantiser's high frequencies damped
-        l_wide, gain = gaussian_blur(lc, cfg.wide_prefilter_px)
-        r_wide = gaussian_blur(rc, cfg.wide_prefilter_px)[0]
+        l_wide, gain, coef_wide, (rl, rr) = wide_prefilter(lc, rc, noise, cfg.wide_prefilter_px)
         r = int(cfg.wide_radius)
         hh, ww = lc.shape
         p = xy[idx]
         idx = idx[(p[:, 0] >= r) & (p[:, 1] >= r) & (p[:, 0] < ww - r) & (p[:, 1] < hh - r)]
         # the shift sees the prefiltered noise as white noise of variance ρ·σ² (ρ from the
         # images' own gradient spectra, features/cfa.py), more than the per-pixel Σk² says
-        taps = gaussian_kernel(cfg.wide_prefilter_px)
-        rl, rr = (
-            shift_noise_factor(im, n, kernel=taps) for im, n in zip((lc, rc), noise, strict=True)
-        )
         shift_wide = (shift_noise[0] * rl**0.5, shift_noise[1] * rr**0.5)
         models = NoiseModel(scaled(noise, gain), scaled(noise_in, gain), shift_wide)
         # the quantiser's residual is correlated over its blocks and the prefilter: σ_d from
@@ -232,7 +229,7 @@ def match_rectified(
         # a blur equalisation, whose even misfit the autocorrelation would read as noise)
         corr = corr or (cfg.wide_correlated and added == (0.0, 0.0))
         wide_windows = Windows(
-            l_wide, bspline_coefficients(r_wide), xy[idx], s.d0[idx], s.e0[idx], r,
+            l_wide, coef_wide, xy[idx], s.d0[idx], s.e0[idx], r,
             cfg.wide_sigma_w,
         )
         fit = fit_windows(wide_windows, models, cfg, corr)

@@ -10,6 +10,7 @@ fine matching then finds a tight, wrong plane around whichever peak the coarse s
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +26,8 @@ from phonestereo.flows.coarse import (
     tile_wt_scale,
 )
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.tele_roi_lazy import LazyPair
+from phonestereo.flows.tele_roi_scale import coarse_reads, preimage, scaled_part
 
 Box = tuple[int, int, int, int]
 
@@ -97,13 +100,17 @@ def _first_usable(
     lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig,
     first: CoarsePeak | None = None,
     maps: TileMaps | None = None,
+    before: Callable[[Box], None] | None = None,
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
     """The first box whose coarse peak can be used (``first``: the first box's peak on this
-    very pair, already searched; ``maps``: its tiles' maps about that peak)."""
+    very pair, already searched; ``maps``: its tiles' maps about that peak; ``before``: called
+    with each box before it is searched)."""
     for i, cbox in enumerate(boxes):
         if i == 0 and first is not None:
             cp = first
         else:
+            if before is not None:
+                before(cbox)
             cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg, maps if i == 0 else None)
         if not why:
@@ -118,6 +125,8 @@ def coarse_peak(
     d_max: int,
     cfg: RoiConfig,
     center: tuple[float, float] | None = None,
+    partial: bool = False,
+    cover: LazyPair | None = None,
 ) -> CoarseChoice:
     """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
     used — or the last box's with the reason it cannot.
@@ -133,9 +142,19 @@ def coarse_peak(
     win over the true disparity; corrected, the true peak wins 0.96 to 0.83, and at 3.6-4 m
     the box correlates 0.95 instead of 0.22-0.30. If the corrected pair gives no usable peak
     the uncorrected one is tried too.
+
+    ``partial``: the corrected tele is computed only where the coarse step reads it (each
+    box's strip as it is tried, :mod:`~phonestereo.flows.tele_roi_scale`, the same pixels),
+    the rest of the returned ``right`` keeping the uncorrected ones — for a caller that
+    resamples the fine part again (:func:`~phonestereo.flows.roi_window.fine_window`).
+    ``cover``: ``lw`` and ``rt`` are its arrays, resampled where the first box is read; each
+    other box's parts (and the tele the pre-scale reads) are resampled before it is tried.
     """
     assert boxes, "no coarse box"
     b0 = boxes[0]
+    size = (rt.shape[1], rt.shape[0])
+    if cover is not None:
+        cover.cover_box(b0)
     tz, s = float("nan"), float("nan")
     p0: CoarsePeak | None = None
     maps: list[TileMaps] = []  # the tiles' ±8 px maps about p0: the tile test's first peak
@@ -147,12 +166,24 @@ def coarse_peak(
     prescale = tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px
     why_s = ""
     if prescale and center is not None:
-        rt_s = rescale_tele(rt, s, center)
-        cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg)
+        fill = None
+        if partial:
+            rt_s = rt.copy()
+
+            def fill(b: Box) -> None:
+                x0, y0, x1, y1 = part = coarse_reads(b, -2, d_max, cfg.coarse_rows, size)
+                if cover is not None:
+                    cover.cover_box(b)
+                    cover.cover_right(preimage(part, s, center, size))
+                rt_s[y0:y1, x0:x1] = scaled_part(rt, s, center, part)
+        else:
+            rt_s = rescale_tele(rt, s, center)
+        cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg, before=fill)
         if not why:
             return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
         why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
-    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None)
+    cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None,
+                                      before=None if cover is None else cover.cover_box)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
     if why_s:

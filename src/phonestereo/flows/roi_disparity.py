@@ -33,7 +33,7 @@ from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
-from phonestereo.flows.roi_window import coarse_window, fine_part, fine_window
+from phonestereo.flows.roi_window import coarse_lazy, coarse_window, fine_part, fine_window
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array, frozen
@@ -294,9 +294,14 @@ def measure_roi(
     pending = background(win.source, "tele", image_tele)
     source_wide = win.source("wide", image_wide)
     center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    # the left's coarse part here while the helper still blurs the tele (coarse_lazy)
+    lazy = coarse_lazy((source_wide, pending), box, d_max, cfg, cboxes[0], image_tele)
     sources = (source_wide, pending.result())
-    lw, rt, two_pass = coarse_window(sources, box, d_max, cfg, cboxes)
-    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center)
+    if lazy is None:
+        lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
+    else:  # the coarse step reads the first box; the next ones are resampled if tried
+        lw, rt, two_pass = lazy.left, lazy.right, True
+    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center, partial=two_pass, cover=lazy)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
     d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right

@@ -10,23 +10,29 @@ gives (issue #18: the window remap was ~35 % of ``measure_roi`` at 12 MP).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from concurrent.futures import Future
 from typing import Any
 
+import cv2
 import numpy as np
 
-from phonestereo.features._threads import background
+from phonestereo.features._threads import background, run_split
 from phonestereo.features.subpixel import PREFILTER_MARGIN
-from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.tele_roi_lazy import LazyPair
+from phonestereo.flows.tele_roi_scale import fixed_point_maps, scale_matrix
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
 __all__ = [
     "COARSE_INTERPOLATION",
     "MAX_FINE_SHARE",
+    "coarse_lazy",
     "coarse_window",
     "fine_part",
     "fine_window",
     "remap_pair",
+    "two_passes",
 ]
 
 
@@ -78,42 +84,42 @@ def fine_part(
     return _fine_part(box, lo_d, hi_d, e0, cfg, size)
 
 
-def coarse_window(
-    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
-    left_boxes: tuple[tuple[int, int, int, int], ...] = (),
-) -> tuple[Any, Any, bool]:
-    """The window pair the coarse step reads, and whether the fine part must be resampled
-    again (:func:`fine_window`): cubic when the fine part (bounded by the whole searched
-    range −2 … d_max and the coarse rows) is a small share of the window, else Lanczos-4.
-
-    ``left_boxes`` (x, y, w, h): the only part of the left window the coarse step reads (its
-    boxes); with two passes the left is then resampled there only (zeros elsewhere)."""
-    H, W = sources[0].map_x.shape
+def two_passes(box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
+               size: tuple[int, int]) -> bool:
+    """Whether the coarse step reads a cubic window and the fine part is resampled again
+    (:func:`fine_window`): when the fine part (bounded by the whole searched range −2 … d_max
+    and the coarse rows) is a small share of the window of ``size`` (W, H)."""
+    W, H = size
     x0, y0, x1, y1 = _fine_part(box, -2 - cfg.fine_range_px, d_max + cfg.fine_range_px,
                                 cfg.coarse_rows, cfg, (W, H))
-    if (x1 - x0) * (y1 - y0) > MAX_FINE_SHARE * W * H:
-        return (*remap_pair(sources, DEFAULT_INTERPOLATION), False)
-    if not left_boxes:
-        return (*remap_pair(sources, COARSE_INTERPOLATION), True)
-    return (*_coarse_pair(sources, left_boxes), True)
+    return (x1 - x0) * (y1 - y0) <= MAX_FINE_SHARE * W * H
 
 
-def _coarse_pair(
-    sources: tuple[Source, Source], left_boxes: tuple[tuple[int, int, int, int], ...]
-) -> tuple[Any, Any]:
-    """The cubic pair with the left resampled only over its boxes' bounding box, the right
-    whole: its first k rows on the helper thread, the rest here after the left's part (each
-    thread resamples about as many pixels; every pixel is the whole-window remap's)."""
+def coarse_window(
+    sources: tuple[Source, Source], box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
+) -> tuple[Any, Any, bool]:
+    """The whole window pair the coarse step reads, and whether the fine part must be
+    resampled again (:func:`two_passes`): cubic then, else Lanczos-4."""
     H, W = sources[0].map_x.shape
-    x0, y0 = min(b[0] for b in left_boxes), min(b[1] for b in left_boxes)
-    x1, y1 = max(b[0] + b[2] for b in left_boxes), max(b[1] + b[3] for b in left_boxes)
-    k = min(round((H + (x1 - x0) * (y1 - y0) / W) / 2), H - 1)
-    top = background(sources[1].remap, COARSE_INTERPOLATION, (0, 0, W, k))
-    part = sources[0].remap(COARSE_INTERPOLATION, (x0, y0, x1, y1))
-    left = np.zeros((H, W, *part.shape[2:]), part.dtype)
-    left[y0:y1, x0:x1] = part
-    bottom = sources[1].remap(COARSE_INTERPOLATION, (0, k, W, H))
-    return left, np.concatenate([top.result(), bottom])
+    if not two_passes(box, d_max, cfg, (W, H)):
+        return (*remap_pair(sources, DEFAULT_INTERPOLATION), False)
+    return (*remap_pair(sources, COARSE_INTERPOLATION), True)
+
+
+def coarse_lazy(
+    sources: tuple[Source, Source | Future[Source]], box: tuple[int, int, int, int], d_max: int,
+    cfg: RoiConfig, first_box: tuple[int, int, int, int], tele_like: Any = None,
+) -> LazyPair | None:
+    """With two passes, the cubic pair resampled where the coarse step reads the coarse box
+    ``first_box`` (x, y, w, h) only (:class:`~phonestereo.flows.tele_roi_lazy.LazyPair`,
+    which resamples the next boxes' parts when asked; the tele source may still be pending
+    on the helper thread, ``tele_like`` its dtype); None with one pass (:func:`coarse_window`)."""
+    H, W = sources[0].map_x.shape
+    if not two_passes(box, d_max, cfg, (W, H)):
+        return None
+    pair = LazyPair(sources, COARSE_INTERPOLATION, d_max, cfg.coarse_rows, tele_like)
+    pair.cover_box(first_box)
+    return pair
 
 
 def fine_window(
@@ -136,17 +142,25 @@ def fine_window(
         lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
         part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
 
-    def tele() -> Any:  # the tele's part, pre-scaled and pasted, on the helper thread
-        fine_t = sources[1].remap(DEFAULT_INTERPOLATION, part_t)
-        if scale != 1.0 and center is not None:  # pre-scale the fine tele, into part_w only
-            src = rt.copy()
-            src[part_t[1] : part_t[3], part_t[0] : part_t[2]] = fine_t
-            fine_t = rescale_tele(src, scale, center, part_w)[y0:y1, x0:x1]
-        out = rt.copy()
-        out[y0:y1, x0:x1] = fine_t
-        return out
-
-    pending = background(tele)
+    pending = background(sources[1].remap, DEFAULT_INTERPOLATION, part_t)  # the tele's part
     lw = lw.copy()
     lw[y0:y1, x0:x1] = sources[0].remap(DEFAULT_INTERPOLATION, part_w)
-    return lw, pending.result()
+    out = rt.copy()
+    if scale == 1.0 or center is None:
+        out[y0:y1, x0:x1] = pending.result()
+        return lw, out
+    # pre-scale the fine tele into part_w: rescale_tele(part_t pasted into rt, box=part_w)'s
+    # pixels (its taps stay inside part_t), from part_t alone, in two row bands (one per thread)
+    fine_t = pending.result()
+    m = scale_matrix(scale, center, (x0, y0))
+    h = y1 - y0
+
+    def warp(bands: Sequence[tuple[int, int]]) -> None:
+        for a, b in bands:
+            xy, frac = fixed_point_maps(m, (0, a, x1 - x0, b), (part_t[0], part_t[1]))
+            out[y0 + a : y0 + b, x0:x1] = cv2.remap(
+                fine_t, xy, frac, cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT
+            )
+
+    run_split(warp, [(0, h // 2), (h // 2, h)], min_items=2)
+    return lw, out
