@@ -107,3 +107,24 @@ def test_faces_take_the_verification_focus_regime() -> None:
     # a module whose verification chart keeps one focus keeps it for the faces too (1002)
     plan = plan_scenario("thesis-bench", random_module(1002), 1002, config=QUICK)
     assert {pc.state.conditions.focus_m for pc in plan.captures} == {1.5}
+
+
+def test_heated_start_follows_the_module_warm_up() -> None:
+    # the presets (τ = 70 s) keep their 300 s start: 1.4 % of the drift to come, within the
+    # 1.5 % that "heated" allows; a module that warms with τ = 118 s starts at 4.2 τ instead
+    # (at 300 s 7.9 % would still be to come, learned by near-to-far faces as a gain)
+    from phonestereo.sim.coverage import HEATED_DRIFT_LEFT, heated_start_s
+
+    notes: list[str] = []
+    folded = load_module("folded-x3")
+    assert heated_start_s(folded, 300.0, notes) == 300.0 and notes == []
+    slow = folded.model_copy(update={"heating": folded.heating.model_copy(update={"tau_s": 118.0})})
+    start = heated_start_s(slow, 300.0, notes)
+    assert np.exp(-start / 118.0) <= HEATED_DRIFT_LEFT < np.exp(-(start - 1.0) / 118.0)
+    assert len(notes) == 1 and "τ = 118 s" in notes[0]
+    # without the heating effect there is nothing to wait for
+    assert heated_start_s(slow.with_effects(heating=False), 300.0, []) == 300.0
+    # the thesis bench's first face capture is at the heated start
+    plan = plan_scenario("thesis-bench", slow, 0, config=QUICK)
+    first = min(c.state.conditions.time_s for c in plan.captures)
+    assert first == start, first

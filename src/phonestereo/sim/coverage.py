@@ -57,6 +57,11 @@ CIRCLE_MARGIN = 1.15
 BLUR_BUDGET_PX = 13.0
 #: Distances are rounded to this step (metres) when re-spaced.
 STEP_M = 0.05
+#: "Heated": at most this fraction of the warm-up drift is still to come at a scenario's heated
+#: start. The presets (τ = 70 s) start at 300 s with e^(−300/70) = 1.4 % to come; a module that
+#: warms with τ = 118 s would still have 7.9 % to come at 300 s, which the faces, taken near to
+#: far, learn as a gain (docs/module-random.md, sessions 13 and 15).
+HEATED_DRIFT_LEFT = 0.015
 
 
 @dataclass(frozen=True)
@@ -181,6 +186,22 @@ __all__ = [
     "plan_notes",
     "tele_blur_px",
 ]
+
+
+def heated_start_s(module: ModuleSpec, start_s: float, notes: list[str]) -> float:
+    """A scenario's heated start (s) for this module: ``start_s`` or later, when at most
+    :data:`HEATED_DRIFT_LEFT` of its warm-up is still to come (τ·ln(1/that), 4.2 τ); a later
+    start is a note in ``notes``. A user learns on a warm phone: how long that takes is the
+    module's own warm-up (``phonestereo analyze heating`` measures it)."""
+    if not module.effects.heating:
+        return start_s
+    tau = module.heating.tau_s
+    heated = float(np.ceil(tau * np.log(1.0 / HEATED_DRIFT_LEFT)))
+    if heated <= start_s:
+        return start_s
+    notes.append(f"heated start {heated:.0f} s, not {start_s:.0f} s: the module warms with "
+                 f"τ = {tau:.0f} s ({HEATED_DRIFT_LEFT:.1%} of its drift still to come)")
+    return heated
 
 
 def fit_config(config: Any, module: ModuleSpec, what: str, notes: list[str]) -> Any:

@@ -42,7 +42,7 @@ from phonestereo.sim.calib_scenario import (
     plan_calibration,
 )
 from phonestereo.sim.capture import CaptureConditions
-from phonestereo.sim.coverage import fit_config
+from phonestereo.sim.coverage import fit_config, heated_start_s
 from phonestereo.sim.heating_scenario import HeatingConfig, plan_heating
 from phonestereo.sim.module import ModuleSpec
 from phonestereo.sim.plan import (
@@ -294,13 +294,13 @@ def _plan_verification(p: Planner, module: ModuleSpec, cfg: VerificationConfig, 
 
 def plan_learning(module: ModuleSpec, seed: int, cfg: LearningConfig) -> Plan:
     p = Planner("learning", module, seed, "face chart at 1-3 m, several sensor positions")
-    _plan_learning(p, module, cfg, cfg.timing.start_s)
+    _plan_learning(p, module, cfg, heated_start_s(module, cfg.timing.start_s, p.notes))
     return p.plan()
 
 
 def plan_verification(module: ModuleSpec, seed: int, cfg: VerificationConfig) -> Plan:
     p = Planner("verification", module, seed, "verification chart at 0.8-4 m, handheld")
-    _plan_verification(p, module, cfg, cfg.timing.start_s)
+    _plan_verification(p, module, cfg, heated_start_s(module, cfg.timing.start_s, p.notes))
     return p.plan()
 
 
@@ -318,7 +318,7 @@ def plan_thesis_bench(module: ModuleSpec, seed: int, cfg: BenchConfig) -> Plan:
         learn = replace(learn, focus_per_distance=True)
         p.notes.append("faces: each stack focused on its chart, as the verification chart is "
                        "(one focus regime for learning and application)")
-    t = _plan_learning(p, module, learn, learn.timing.start_s)
+    t = _plan_learning(p, module, learn, heated_start_s(module, learn.timing.start_s, p.notes))
     _plan_verification(p, module, cfg.verification, t)
     return p.plan()
 
