@@ -14,14 +14,13 @@ from collections.abc import Sequence
 from concurrent.futures import Future
 from typing import Any
 
-import cv2
 import numpy as np
 
 from phonestereo.features._threads import background, run_split
 from phonestereo.features.subpixel import PREFILTER_MARGIN
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.tele_roi_lazy import LazyPair
-from phonestereo.flows.tele_roi_scale import fixed_point_maps, scale_matrix
+from phonestereo.flows.tele_roi_scale import preimage, scale_matrix, warp_part
 from phonestereo.rectification.maps import DEFAULT_INTERPOLATION, Source
 
 __all__ = [
@@ -137,10 +136,7 @@ def fine_window(
     H, W = lw.shape[:2]
     x0, y0, x1, y1 = part_w = part_t = fine_part(box, d0, e0, cfg, (W, H))
     if scale != 1.0 and center is not None:  # rescale_tele reads rt at c + (q − c)/s (cubic)
-        c = np.array(center)
-        q = c + (np.array([[x0, y0], [x1 - 1, y1 - 1]], float) - c) / scale
-        lo, hi = np.floor(q.min(0)).astype(int) - 3, np.ceil(q.max(0)).astype(int) + 4
-        part_t = (max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H))
+        part_t = preimage(part_w, scale, center, (W, H))
 
     pending = background(sources[1].remap, DEFAULT_INTERPOLATION, part_t)  # the tele's part
     lw = lw.copy()
@@ -157,10 +153,7 @@ def fine_window(
 
     def warp(bands: Sequence[tuple[int, int]]) -> None:
         for a, b in bands:
-            xy, frac = fixed_point_maps(m, (0, a, x1 - x0, b), (part_t[0], part_t[1]))
-            out[y0 + a : y0 + b, x0:x1] = cv2.remap(
-                fine_t, xy, frac, cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT
-            )
+            out[y0 + a : y0 + b, x0:x1] = warp_part(fine_t, m, (0, a, x1 - x0, b), part_t[:2])
 
     run_split(warp, [(0, h // 2), (h // 2, h)], min_items=2)
     return lw, out

@@ -18,7 +18,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["coarse_reads", "fixed_point_maps", "preimage", "scale_matrix", "scaled_part"]
+__all__ = [
+    "coarse_reads", "fixed_point_maps", "preimage", "scale_matrix", "scaled_part", "warp_part",
+]
 
 #: ``cv2.warpAffine``'s coordinate bits (AB_BITS) and the interpolation tables' (INTER_BITS).
 _AB_BITS, _INTER_BITS = 10, 5
@@ -87,11 +89,18 @@ def fixed_point_maps(
     return xy, a
 
 
+def warp_part(source: Any, m: Any, box: Box, origin: tuple[int, int] = (0, 0)) -> Any:
+    """The pixels in ``box`` (x0, y0, x1, y1) of ``cv2.warpAffine`` (cubic, inverse map ``m``,
+    constant border) of an image of which ``source`` is the part starting at ``origin``
+    (:func:`fixed_point_maps`), bit for bit."""
+    xy, a = fixed_point_maps(m, box, origin)
+    return cv2.remap(source, xy, a, cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT)
+
+
 def scaled_part(right: Any, scale: float, center: tuple[float, float], box: Box) -> Any:
     """The pixels in ``box`` (x0, y0, x1, y1) of ``rescale_tele(right, scale, center)``, bit
     for bit, without warping the rest of the window."""
-    xy, a = fixed_point_maps(scale_matrix(scale, center), box)
-    return cv2.remap(right, xy, a, cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT)
+    return warp_part(right, scale_matrix(scale, center), box)
 
 
 def coarse_reads(
