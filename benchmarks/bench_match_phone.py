@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from _support.match_phone import evaluate, pairs, rectification
+from _support.match_phone import evaluate, pairs, pooled_rms_z, rectification
 
 
 def main() -> int:
@@ -36,12 +36,10 @@ def main() -> int:
         )
     n100 = sum(r["matches"] >= 100 for r in rows)
     z = [r["rms_z"] for r in rows if np.isfinite(r["rms_z"])]
-    # pooled over every paired match of the 16 pairs (each pair weighted by its pairs)
-    w = np.array([r["paired"] for r in rows if np.isfinite(r["rms_z"])], dtype=np.float64)
-    pooled = float(np.sqrt(np.sum(w * np.square(z)) / np.sum(w)))
+    paired = sum(r["paired"] for r in rows if np.isfinite(r["rms_z"]))
     print(
         f"≥ 100 matches on {n100} of {len(rows)} pairs; RMS z median {np.median(z):.2f}, "
-        f"pooled over the {int(w.sum())} paired matches {pooled:.2f}"
+        f"pooled over the {paired} paired matches {pooled_rms_z(rows):.2f}"
     )
     return 0
 

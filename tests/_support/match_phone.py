@@ -109,6 +109,15 @@ def consistency(left: np.ndarray, right: np.ndarray) -> dict[str, Any]:
     }
 
 
+def pooled_rms_z(rows: list[dict[str, Any]]) -> float:
+    """RMS z over every paired match of the pairs' :func:`consistency` rows (each pair's RMS
+    weighted by its pairs; pairs without a finite RMS are left out)."""
+    ok = [r for r in rows if np.isfinite(r["rms_z"])]
+    w = np.array([r["paired"] for r in ok], dtype=np.float64)
+    z = np.array([r["rms_z"] for r in ok])
+    return float(np.sqrt(np.sum(w * z**2) / np.sum(w)))
+
+
 def evaluate(wide: Path, tele: Path) -> dict[str, Any]:
     """Rectify one real pair and match it both ways (see :func:`consistency`)."""
     left, right = rectification().remap(read_gray(wide), read_gray(tele))

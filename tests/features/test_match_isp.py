@@ -190,8 +190,7 @@ def test_real_phone_pairs(phone_rows: list[dict]) -> None:
     # pooled over every paired match (README): measured 0.82 over 2831 paired matches, inside
     # the acceptance's 0.8–1.25 although 6 pairs read below 0.8 on their own; ±0.03 is the
     # spread between the landed matcher versions, so a change that moves it further is seen
-    w = np.array([r["paired"] for r in rows], dtype=np.float64)
-    pooled = float(np.sqrt(np.sum(w * z**2) / np.sum(w)))
+    pooled = phone.pooled_rms_z(rows)
     assert 0.79 <= pooled <= 0.85, pooled
 
 
