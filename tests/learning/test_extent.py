@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from phonestereo.flows.config import Corrector, FlowConfig
-from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
+from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent, distance_layers
 from phonestereo.learning.observation import Observation
 
 
@@ -91,3 +91,17 @@ def test_the_capture_scatter_leaves_out_the_faces_own_noise() -> None:
 
     assert Corrector(faces(0.0), FlowConfig()).capture_sigma_px <= 0.01
     assert 0.02 <= Corrector(faces(0.04), FlowConfig()).capture_sigma_px <= 0.07
+
+
+def test_the_common_scale_averages_over_distance_layers_not_captures() -> None:
+    """ρ is the captures' relative spread over √(distance layers) ⊕ the focal prior: captures at
+    one distance share its focus and faces, layers do not (over the 29 bench sets the sets'
+    mean errors read 0.71 of ρ in rms without the division, 1.08 with it; session 16)."""
+    one = LearnedExtent.from_observations(_faces((1.5,)))
+    three = LearnedExtent.from_observations(_faces((1.0, 2.0, 3.0)))
+    assert (one.n_layers, three.n_layers) == (1, 3)
+    for ext in (one, three):
+        assert np.isclose(ext.rho, np.hypot(ext.rho_captures / np.sqrt(ext.n_layers),
+                                            FOCAL_REL_SIGMA))
+    # a continuous spread of distances is one chain, not many layers (ρ stays conservative)
+    assert distance_layers(18 / np.linspace(1.0, 3.0, 15)) == 1

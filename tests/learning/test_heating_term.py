@@ -132,3 +132,31 @@ def test_a_cold_capture_with_a_temperature_is_corrected_not_gated() -> None:
     passed, reason = gates(_temp(60.0))["heated"]
     assert passed and "learned heating term" in reason
     assert not gates(None)["heated"][0]
+
+
+def test_a_drift_the_captures_cannot_tell_widens_the_gain_but_does_not_shift_it() -> None:
+    """A warm module (no drift): the time slope is not significant, so the gain's σ is its σ
+    with the drift free in the fit and no more. Adding how far freeing the drift moved the gain
+    (noise when there is no drift, of variance σ²_with − σ²_alone) would count that freedom
+    twice: over the 29 bench sets the realised gain errors read 0.65 of such a σ in rms,
+    0.74 of this one with none beyond 2σ (docs/module-random.md, session 16)."""
+    obs = _faces(report=False)
+    flat = [replace(o, d_measured_px=o.d_measured_px + K_PX_PER_C * (_temp(o.time_s) - 35.0))
+            for o in obs]
+    term = HeatingTerm.fit(flat, index="time_s")
+    assert not term.ok and np.isfinite(term.gain_sigma)
+    # the same fit by hand: the gain's σ with a time term, nothing added
+    t = np.array([o.time_s for o in flat])
+    cid = np.unique([o.capture_id for o in flat], return_inverse=True)[1]
+    mean = lambda v: np.bincount(cid, v) / np.bincount(cid)  # noqa: E731
+    c = mean(np.array([o.d_expected_px - o.d_measured_px for o in flat]))
+    d = mean(np.array([o.d_measured_px for o in flat]))
+    tt = mean(t)
+    xy = [mean(np.array([getattr(o, k) for o in flat])) for k in ("x_px", "y_px")]
+    scale = np.ptp(np.concatenate(xy))
+    x = np.column_stack([np.ones_like(d), d - d.mean(), tt - np.median(tt)]
+                        + [(v - v.mean()) / scale for v in xy])  # as the fit: + sensor position
+    beta, *_ = np.linalg.lstsq(x, c, rcond=None)
+    res = c - x @ beta
+    cov = res @ res / (len(c) - x.shape[1]) * np.linalg.inv(x.T @ x)
+    assert np.isclose(term.gain_sigma, np.sqrt(cov[1, 1]), rtol=1e-9)

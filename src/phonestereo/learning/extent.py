@@ -7,8 +7,10 @@ together unless σ carries them:
 
 - **systematic (common-mode) scale** ``rho``: the IPD ruler gives depth as f_wide·IPD/ipd_px,
   so the correction inherits every relative error of that scale — the spread of the learned
-  captures' own relative offsets (their focus, pose and landmark biases differ; shared faces
-  and focus keep them from averaging out over the captures), and the wide's
+  captures' own relative offsets (their focus, pose and landmark biases differ), averaged over
+  the *distance layers* they were learned at, not over the captures: captures at one distance
+  share its focus state and see the same faces at one scale, so their offsets do not average
+  out among themselves, while layers far apart in disparity (> ``LAYER_GAP``) do — and the wide's
   focal length at the working focus, which the IPD ruler cannot see (depth from IPD and from
   disparity scale alike with it; a phone wide of ~4 mm breathes ~0.4 % per dioptre of focus
   between the factory calibration and use, §3.5, which the wide-breathing fix takes out only
@@ -53,9 +55,16 @@ from phonestereo.learning.observation import as_observation_array, corrections_p
 #: docstring): with it the 29 bench sets' common-mode errors (each set's mean error) over their
 #: ρ have an rms of 1.02 (0.25 % made it 0.75, 0 1.13), once the faces carry the pooled radial
 #: fit (docs/module-random.md, session 14; 0.25 % in session 13 matched the median ρ to the rms
-#: common mode of the time, 0.36 %). A reported wide focus's own σ is per capture, not in it
-#: (``FlowConfig.wide_focus_sigma_dioptre``).
+#: common mode of the time, 0.36 %). Session 16 (modules learned warm, ρ averaged over distance
+#: layers): 1.08, and 0.89 with the correction's fit σ beside ρ, so it stays. A reported wide
+#: focus's own σ is per capture, not in it (``FlowConfig.wide_focus_sigma_dioptre``).
 FOCAL_REL_SIGMA = 0.001
+
+#: Relative gap in mean measured disparity that separates two distance layers of learning
+#: captures (``rho`` averages over layers). The bench's face charts stand at 1–3 m in layers
+#: whose captures lie within ±5 % of each other and ≥ 40 % apart; 20 % splits them and merges a
+#: continuous spread (population faces) into few layers, which only makes ``rho`` larger.
+LAYER_GAP = 0.2
 
 _MAD = 1.4826
 
@@ -88,6 +97,8 @@ class LearnedExtent:
     drift_gain_sigma: float = float("nan")
     #: d̄, the learned captures' mean measured disparity, px (where the offset is pinned).
     d_centre_px: float = float("nan")
+    #: Distance layers the captures were learned at (:func:`distance_layers`).
+    n_layers: int = 1
 
     @classmethod
     def from_observations(
@@ -120,14 +131,17 @@ class LearnedExtent:
         span = np.ptp(xy, axis=0) if len(xy) else np.zeros(2)
         reach = max(0.25 * float(np.hypot(*span)), 150.0)
         lo, hi = np.percentile(d, [5, 95]) if d.size else (np.nan, np.nan)
-        # Not divided by √G: the captures share the chart's faces and the working focus, so
-        # their relative offsets do not average out (measured on folded-x3 seeds 0-3: with
-        # /√G the within-σ of one set fell to 33 %).
-        rho = float(np.hypot(rho_c, focal_rel_sigma))
+        # Divided by √(layers), not √G: the captures of one distance share its focus and the
+        # chart's faces, so their relative offsets do not average out among themselves (with
+        # /√G the within-σ of folded-x3 seed 0 fell to 33 %; without any division the 29 bench
+        # sets' mean errors read 0.71 of ρ in rms, with /√layers 1.08: docs/module-random.md,
+        # session 16).
+        layers = distance_layers(mean_d)
+        rho = float(np.hypot(rho_c / np.sqrt(max(layers, 1)), focal_rel_sigma))
         return cls(
             float(lo), float(hi), rho, float(rho_c),
             gain_sigma, float(cap), reach, g, cKDTree(xy) if len(xy) else None,
-            float(drift_gain_sigma), float(np.mean(mean_d)) if g else float("nan"),
+            float(drift_gain_sigma), float(np.mean(mean_d)) if g else float("nan"), layers,
         )
 
     def outside_px(self, d: Any) -> np.ndarray:
@@ -157,9 +171,26 @@ class LearnedExtent:
             "rho": round(self.rho, 6), "rho_captures": round(self.rho_captures, 6),
             "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
             "capture_sigma_px": round(self.capture_sigma_px, 5), "n_captures": self.n_captures,
+            "n_layers": self.n_layers,
             "drift_gain_sigma": None if not np.isfinite(self.drift_gain_sigma) else round(
                 self.drift_gain_sigma, 6),
         }
+
+
+def distance_layers(d_px: Any, gap: float = LAYER_GAP) -> int:
+    """How many distance layers captures of mean measured disparities ``d_px`` (G,) px stand
+    in: runs of the sorted disparities whose consecutive ratio stays within 1 + ``gap``.
+
+    >>> distance_layers([30.1, 29.0, 15.2, 15.0, 14.6, 10.1, 9.8])
+    3
+    >>> distance_layers([])
+    0
+    """
+    d = np.sort(np.asarray(d_px, dtype=np.float64).ravel())
+    d = d[np.isfinite(d) & (d > 0)]
+    if d.size == 0:
+        return 0
+    return int(1 + np.sum(d[1:] / d[:-1] > 1.0 + gap))
 
 
 def _robust_sd(v: np.ndarray) -> float:
@@ -185,4 +216,4 @@ def _slope_sigma(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.sqrt(s2 / sxx))
 
 
-__all__ = ["FOCAL_REL_SIGMA", "LearnedExtent"]
+__all__ = ["FOCAL_REL_SIGMA", "LAYER_GAP", "LearnedExtent", "distance_layers"]

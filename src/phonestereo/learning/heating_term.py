@@ -104,11 +104,14 @@ class HeatingTerm:
     #: ``FlowConfig.warmup_s`` / 2.6).
     tau_s: float = 70.0
     #: σ of the gain over disparity (px per px of d) in the same capture-level fit, the drift
-    #: allowed for, ⊕ (unless a temperature term takes the drift out of the observations) how
-    #: far allowing for the drift moves the gain from the fit without it: what the captures
-    #: can tell of the gain when their times or temperatures move with their distances (module
-    #: docstring); NaN when the fit could not be made. Set whether or not the drift itself is
-    #: significant.
+    #: allowed for, ⊕ (when the drift is significant and no temperature term takes it out of the
+    #: observations) how far allowing for the drift moves the gain from the fit without it: what
+    #: the captures can tell of the gain when their times or temperatures move with their
+    #: distances (module docstring); NaN when the fit could not be made. Set whether or not the
+    #: drift itself is significant: a drift the captures cannot tell from zero still widens the
+    #: gain's σ, but its shift is then noise (of variance σ²_with − σ²_alone) and adding it would
+    #: count the drift's freedom twice (over the 29 bench sets the realised gain errors read 0.65
+    #: of that σ in rms, 0.74 of this one, none beyond 2σ; docs/module-random.md, session 16).
     gain_sigma: float = float("nan")
 
     @classmethod
@@ -165,12 +168,13 @@ class HeatingTerm:
             use = new
         k, k_sigma = float(beta[2]), float(sd[2])
         applied = abs(k) > SIGNIFICANCE * k_sigma and index == "temperature_c"
-        # The gain's σ with the drift in the fit; unless the drift is taken out of the
-        # observations (an applied temperature term), ⊕ how far allowing for it moves the gain.
+        # The gain's σ with the drift in the fit; when the drift is significant and not taken
+        # out of the observations (an applied temperature term), ⊕ how far it moves the gain.
+        significant = abs(k) > SIGNIFICANCE * k_sigma
         alone, _, _ = _ols(np.delete(x[use], 2, axis=1), c_i[use])
-        shift = 0.0 if applied or alone is None else float(beta[1] - alone[1])
+        shift = 0.0 if applied or not significant or alone is None else float(beta[1] - alone[1])
         g_sigma = float(np.hypot(sd[1], shift))
-        if not abs(k) > SIGNIFICANCE * k_sigma:
+        if not significant:
             return cls(False, f"no significant drift over the learning captures' {index}: "
                        f"{k:.3g} ± {k_sigma:.2g} px per unit", k, k_sigma, ref, (lo, hi),
                        int(use.sum()), index, tau_s, g_sigma)
