@@ -18,6 +18,19 @@ from phonestereo.geometry.checks import Array, as_points
 from phonestereo.geometry.lens import UNDISTORT_TOL, LensModel
 
 
+def _even_cubic(
+    a: float, b: float, c: float, r2: Array
+) -> tuple[Array, Array, tuple[Array, Array, Array]]:
+    """``1 + a·r² + b·r⁴ + c·r⁶``, its derivative in r² and the powers (r², r⁴, r⁶).
+
+    The radial factor of :class:`OpenCV5`, and the numerator and denominator of
+    :class:`OpenCV8`'s; ``r2`` is r² of any shape (...), normalised units, and every output has
+    that shape.
+    """
+    r4, r6 = r2 * r2, r2 * r2 * r2
+    return 1 + a * r2 + b * r4 + c * r6, a + 2 * b * r2 + 3 * c * r4, (r2, r4, r6)
+
+
 @dataclass(frozen=True)
 class OpenCV5(LensModel):
     """OpenCV's 5-coefficient Brown–Conrady model (k1, k2, p1, p2, k3)."""
@@ -28,11 +41,9 @@ class OpenCV5(LensModel):
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3 = self.coefficients
-        r4, r6 = r2 * r2, r2 * r2 * r2
-        g = 1 + k1 * r2 + k2 * r4 + k3 * r6
-        dg = k1 + 2 * k2 * r2 + 3 * k3 * r4
+        g, dg, powers = _even_cubic(k1, k2, k3, r2)
         dc = np.zeros((*r2.shape, 5))
-        dc[..., 0], dc[..., 1], dc[..., 4] = r2, r4, r6
+        dc[..., 0], dc[..., 1], dc[..., 4] = powers
         return g, dg, dc
 
 
@@ -46,18 +57,15 @@ class OpenCV8(LensModel):
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3, k4, k5, k6 = self.coefficients
-        r4, r6 = r2 * r2, r2 * r2 * r2
-        num = 1 + k1 * r2 + k2 * r4 + k3 * r6
-        den = 1 + k4 * r2 + k5 * r4 + k6 * r6
-        dnum = k1 + 2 * k2 * r2 + 3 * k3 * r4
-        dden = k4 + 2 * k5 * r2 + 3 * k6 * r4
+        num, dnum, powers = _even_cubic(k1, k2, k3, r2)
+        den, dden, _ = _even_cubic(k4, k5, k6, r2)
         with np.errstate(divide="ignore", invalid="ignore"):
             g = num / den
             dg = (dnum * den - num * dden) / (den * den)
             dc = np.zeros((*r2.shape, 8))
-            dc[..., 0], dc[..., 1], dc[..., 4] = r2 / den, r4 / den, r6 / den
+            dc[..., 0], dc[..., 1], dc[..., 4] = (p / den for p in powers)
             q = -num / (den * den)
-            dc[..., 5], dc[..., 6], dc[..., 7] = q * r2, q * r4, q * r6
+            dc[..., 5], dc[..., 6], dc[..., 7] = (q * p for p in powers)
         return g, dg, dc
 
 
