@@ -71,7 +71,9 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "0.1 %: the IPD ruler through the factory wide model and the landmark detector's IPD "
         "bias. With it the 29 bench sets' mean errors over their ρ have an rms of 1.02 (0.25 % "
         "made it 0.75), with the faces on the pooled radial fit (docs/module-random.md, "
-        "session 14). A reported wide focus's σ is per capture: wide_focus_sigma_dioptre.",
+        "session 14); 1.08 with the modules learned warm and ρ averaged over the learning's "
+        "distance layers (session 16). A reported wide focus's σ is per capture: "
+        "wide_focus_sigma_dioptre.",
     ),
     "max_relative_sigma": (
         "relative",
