@@ -118,7 +118,23 @@ def fine_core(
     core = _fine_part(box, 0, 0, 0.0, cfg, size)
     if scale != 1.0 and center is not None:
         core = preimage(core, scale, center, size)
-    return Ahead(core, background(source.remap, DEFAULT_INTERPOLATION, core), scale)
+    return Ahead(core, background(_one_core, source, core), scale)
+
+
+#: Output pixels per ``cv2.remap`` call of :func:`_one_core`: OpenCV splits a call among its
+#: own threads from 1.5 × 2¹⁶ pixels; below that it runs on the calling thread alone.
+_SERIAL_PX = 1 << 16
+
+
+def _one_core(source: Source, part: tuple[int, int, int, int]) -> Any:
+    """``source.remap`` of ``part`` by the default interpolation in row bands small enough that
+    OpenCV does not hand them to its own threads: the helper then takes one core, not the one
+    the coarse step's correlation runs on (the same pixels)."""
+    x0, y0, x1, y1 = part
+    rows = max(_SERIAL_PX // max(x1 - x0, 1), 1)
+    bands = [source.remap(DEFAULT_INTERPOLATION, (x0, y, x1, min(y + rows, y1)))
+             for y in range(y0, y1, rows)] or [source.remap(DEFAULT_INTERPOLATION, part)]
+    return np.concatenate(bands) if len(bands) > 1 else bands[0]
 
 
 class FineAhead:
