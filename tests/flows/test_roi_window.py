@@ -15,7 +15,13 @@ import pytest
 from phonestereo.features.subpixel import PREFILTER_MARGIN
 from phonestereo.flows.coarse import rescale_tele
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.roi_window import _fine_part, coarse_lazy, coarse_window, fine_window
+from phonestereo.flows.roi_window import (
+    FineAhead,
+    _fine_part,
+    coarse_lazy,
+    coarse_window,
+    fine_window,
+)
 from phonestereo.flows.tele_roi_lazy import RIGHT_REACH
 from phonestereo.flows.tele_roi_scale import coarse_reads
 from phonestereo.geometry import Camera, Rig, Transform
@@ -75,6 +81,36 @@ def test_the_matchers_part_is_the_whole_window_lanczos_remap(scale: float) -> No
     outside[y0:y1, x0:x1] = False
     assert np.array_equal(fw[outside], lw[outside]) and not np.array_equal(fw, whole_w)
     assert np.array_equal(ft[outside], rt_coarse[outside])
+
+
+@pytest.mark.parametrize(("scale", "d0", "e0"), [(1.0, 12.3, -2.0), (1.03, 1.2, -6.0),
+                                                 (1.03, 30.7, 0.0), (0.98, -1.5, 4.0)])
+def test_the_parts_resampled_ahead_give_the_same_pixels(
+    scale: float, d0: float, e0: float
+) -> None:
+    # measure_roi resamples the left's fine part about the box (and, once the coarse step
+    # pre-scales the tele, the tele's) before the coarse disparity is known; fine_window then
+    # adds the bands d0 and e0 ask for: the same pixels as resampling the whole parts
+    rect, w, t = _setup()
+    W, H = rect.wide_rect.size
+    sources = rect.sources(w, t)
+    box = (W // 3, H // 3, W // 3, H // 3)
+    cfg = RoiConfig()
+    lw, rt, _ = coarse_window(sources, box, 40, cfg)
+    center = (W / 2 + 17.0, H / 2 - 9.0)
+    rt_coarse = rescale_tele(rt, scale, center) if scale != 1.0 else rt
+    ahead = FineAhead(sources, box, cfg, center)
+    if scale != 1.0:
+        ahead.prescaled(scale)
+    assert ahead.left is not None and (scale == 1.0) == (ahead.tele is None)
+    fw, ft = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg, ahead)
+    fw0, ft0 = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg)
+    assert np.array_equal(fw, fw0) and np.array_equal(ft, ft0)
+    # a core chosen for another pre-scale is not used
+    other = FineAhead(sources, box, cfg, center)
+    other.prescaled(1.01)
+    fw1, ft1 = fine_window(sources, lw, rt_coarse, box, d0, e0, scale, center, cfg, other)
+    assert np.array_equal(fw1, fw0) and np.array_equal(ft1, ft0)
 
 
 def test_the_coarse_pair_is_resampled_where_the_coarse_step_reads_only() -> None:

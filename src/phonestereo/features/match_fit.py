@@ -184,16 +184,18 @@ def wide_prefilter(
     the prefiltered right, and the shift-noise factors ρ (left, right) of that prefilter
     (:func:`~phonestereo.features.cfa.shift_noise_factor`, for the noise σ ``noise``).
 
-    The right's prefilter and spline run on the helper thread while this one does the left's
-    and both ρ (about equal shares; the same numbers as one after the other: at 12 MP the
-    sequence was ~6 % of the application phase).
+    The right's prefilter, spline and ρ run on the helper thread while this one does the
+    left's (equal shares; the same numbers as one after the other: at 12 MP the sequence was
+    ~6 % of the application phase).
     """
-    def right_coefficients() -> F32:
-        return bspline_coefficients(gaussian_blur(right, sigma)[0])
-
-    pending = background(right_coefficients)
     taps = gaussian_kernel(sigma)
+
+    def right_side() -> tuple[F32, float]:
+        coef = bspline_coefficients(gaussian_blur(right, sigma)[0])
+        return coef, shift_noise_factor(right, noise[1], kernel=taps)
+
+    pending = background(right_side)
     l_wide, gain = gaussian_blur(left, sigma)
-    rho = (shift_noise_factor(left, noise[0], kernel=taps),
-           shift_noise_factor(right, noise[1], kernel=taps))
-    return l_wide, gain, pending.result(), rho
+    rho_left = shift_noise_factor(left, noise[0], kernel=taps)
+    coef, rho_right = pending.result()
+    return l_wide, gain, coef, (rho_left, rho_right)

@@ -127,6 +127,7 @@ def coarse_peak(
     center: tuple[float, float] | None = None,
     partial: bool = False,
     cover: LazyPair | None = None,
+    on_prescale: Callable[[float], None] | None = None,
 ) -> CoarseChoice:
     """The first of ``boxes`` (context first, the ROI's own box last) whose coarse peak can be
     used — or the last box's with the reason it cannot.
@@ -149,6 +150,9 @@ def coarse_peak(
     resamples the fine part again (:func:`~phonestereo.flows.roi_window.fine_window`).
     ``cover``: ``lw`` and ``rt`` are its arrays, resampled where the first box is read; each
     other box's parts (and the tele the pre-scale reads) are resampled before it is tried.
+    ``on_prescale``: called with the scale once the tele is to be pre-scaled, before the
+    corrected pair is searched (``measure_roi`` starts the fine tele's resampling there:
+    :class:`~phonestereo.flows.roi_window.FineAhead`).
     """
     assert boxes, "no coarse box"
     b0 = boxes[0]
@@ -166,6 +170,8 @@ def coarse_peak(
     prescale = tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px
     why_s = ""
     if prescale and center is not None:
+        if on_prescale is not None:
+            on_prescale(s)
         fill = None
         if partial:
             rt_s = rt.copy()

@@ -33,7 +33,13 @@ from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
-from phonestereo.flows.roi_window import coarse_lazy, coarse_window, fine_part, fine_window
+from phonestereo.flows.roi_window import (
+    FineAhead,
+    coarse_lazy,
+    coarse_window,
+    fine_part,
+    fine_window,
+)
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array, frozen
@@ -301,7 +307,10 @@ def measure_roi(
         lw, rt, two_pass = coarse_window(sources, box, d_max, cfg)
     else:  # the coarse step reads the first box; the next ones are resampled if tried
         lw, rt, two_pass = lazy.left, lazy.right, True
-    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center, partial=two_pass, cover=lazy)
+    # the fine parts on the helper while the coarse step correlates here (roi_window.fine_core)
+    ahead = FineAhead(sources, box, cfg, center) if two_pass else None
+    ch = coarse_peak(lw, rt, list(cboxes), d_max, cfg, center, partial=two_pass, cover=lazy,
+                     on_prescale=None if ahead is None else ahead.prescaled)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
     d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
@@ -316,7 +325,7 @@ def measure_roi(
         return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
     if two_pass:
-        lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg)
+        lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg, ahead)
     slo, shi = g.box_small.min(0), g.box_small.max(0)
     variants = [(lw, rt, 0.0)]
     if cfg.equalise_blur:
