@@ -167,10 +167,10 @@ class HeatingTerm:
                 break
             use = new
         k, k_sigma = float(beta[2]), float(sd[2])
-        applied = abs(k) > SIGNIFICANCE * k_sigma and index == "temperature_c"
+        significant = abs(k) > SIGNIFICANCE * k_sigma
+        applied = significant and index == "temperature_c"
         # The gain's σ with the drift in the fit; when the drift is significant and not taken
         # out of the observations (an applied temperature term), ⊕ how far it moves the gain.
-        significant = abs(k) > SIGNIFICANCE * k_sigma
         alone, _, _ = _ols(np.delete(x[use], 2, axis=1), c_i[use])
         shift = 0.0 if applied or not significant or alone is None else float(beta[1] - alone[1])
         g_sigma = float(np.hypot(sd[1], shift))
