@@ -201,3 +201,26 @@ def test_landmark_disparity_same_with_whole_remap(
     for a, b in zip(part, whole, strict=True):
         assert len(a) >= 2
         assert a == b
+
+
+def test_a_face_is_measured_at_its_midpoint_from_both_eyes_or_not_at_all() -> None:
+    # A slanted face: d = 30 + 0.012·Δx px, eyes at Δx = ±55 px, so the eyes differ by 1.3 px.
+    # Two windows survive on one eye, three on the other (the rest lost to blur or the edge).
+    # A test about the face's median used to drop the two as outliers and report the other
+    # eye's mean, 0.66 px off the midpoint's 30 px under a σ of ~0.01 px (random-3000's
+    # +0.9 px face); each eye tested about its own median keeps both, and the fit along the
+    # eye line reads the midpoint.
+    from phonestereo.learning.landmark_disparity import _EyeWindows, _fit_face
+
+    off = np.array([[-59.0, -4.0], [-51.0, 4.0], [51.0, -4.0], [51.0, 4.0], [59.0, 0.0]])
+    eye = np.array([0, 0, 1, 1, 1])
+    d = 30.0 + 0.012 * off[:, 0] + np.array([0.01, -0.01, 0.0, 0.01, -0.01])
+    sd = np.full(5, 0.02)
+    w = _EyeWindows(np.zeros((5, 2), np.int64), off, eye, d, np.zeros(5), 12, 8)
+    d_mid, sigma, _, n, _ = _fit_face(d, sd, np.zeros(5), np.ones(5), off, eye, w)
+    assert n == 5
+    assert abs(d_mid - 30.0) <= 2 * sigma, (d_mid, sigma)  # the truth within 2σ
+    assert abs(d_mid - 30.0) < 0.03  # the windows' own noise, not half the eyes' gap
+    # one eye alone does not locate the midpoint: the face is not measured (n = −1)
+    one = eye == 1
+    assert _fit_face(d[one], sd[one], np.zeros(3), np.ones(3), off[one], eye[one], w)[3] == -1

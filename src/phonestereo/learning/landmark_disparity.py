@@ -124,10 +124,12 @@ class LandmarkDisparityResult:
 @dataclass(frozen=True)
 class _EyeWindows:
     """The searched windows of one face: centres (n, 2), offsets from the pupil midpoint
-    (n, 2), integer-search (d, e) (n,), window radius and grid step, px."""
+    (n, 2), the eye each window is about (n,: 0 or 1), integer-search (d, e) (n,), window
+    radius and grid step, px."""
 
     xy: NDArray[np.int64]
     offset: F64
+    eye: NDArray[np.int64]
     d0: F64
     e0: F64
     radius: int
@@ -144,10 +146,11 @@ def _eye_windows(img: RectifiedPair, pupils: F64, d0: float, e0: float) -> _EyeW
     grid = np.stack(np.meshgrid(k, k), axis=-1).reshape(-1, 2)
     xy = np.rint(pupils[:, None, :] + grid[None]).reshape(-1, 2).astype(np.int64)
     offset = (xy - pupils.mean(axis=0)).astype(np.float64)  # window centre − pupil midpoint
+    eye = np.repeat(np.arange(2), len(grid))
     h, w = img.left.shape
     m = r + PREFILTER_MARGIN
     inside = (xy[:, 0] >= m) & (xy[:, 0] < w - m) & (xy[:, 1] >= m) & (xy[:, 1] < h - m)
-    xy, offset = xy[inside], offset[inside]
+    xy, offset, eye = xy[inside], offset[inside], eye[inside]
     if len(xy) == 0:
         return None
     lo, hi = int(np.floor(d0 - 4.0)), int(np.ceil(d0 + 4.0))
@@ -160,7 +163,7 @@ def _eye_windows(img: RectifiedPair, pupils: F64, d0: float, e0: float) -> _EyeW
     ok = s.searched & ~s.at_edge & np.isfinite(s.d0)
     if not ok.any():
         return None
-    return _EyeWindows(xy[ok], offset[ok], s.d0[ok], s.e0[ok], r, step)
+    return _EyeWindows(xy[ok], offset[ok], eye[ok], s.d0[ok], s.e0[ok], r, step)
 
 
 def _refine_faces(
@@ -192,30 +195,52 @@ def _refine_faces(
         for k, w, a, b in zip(idx, group, bounds[:-1], bounds[1:], strict=True):
             g = good[a:b]
             out[k] = _fit_face(
-                ref.d[a:b][g], sd[a:b][g], ref.e[a:b][g], ref.zncc[a:b][g], w.offset[g], w
+                ref.d[a:b][g], sd[a:b][g], ref.e[a:b][g], ref.zncc[a:b][g], w.offset[g],
+                w.eye[g], w,
             )
     return out
 
 
+def _eye_inliers(d: F64, sd: F64, eye: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Windows on their own eye's disparity (n,): eyelashes, occlusions and wrong peaks out.
+
+    Each eye is tested about its own median: a slanted face's eyes differ by up to ~2 px at
+    1 m, and a test about the face's median would drop the eye with fewer windows whole.
+    """
+    keep = np.ones(len(d), dtype=bool)
+    for k in (0, 1):
+        idx = np.flatnonzero(eye == k)
+        for _ in range(3):
+            if len(idx) < 3:
+                break
+            med = np.median(d[idx])
+            mad = 1.4826 * np.median(np.abs(d[idx] - med))
+            ok = np.abs(d[idx] - med) <= np.maximum(3.0 * mad, 3.0 * sd[idx]) + 0.02
+            if ok.all():
+                break
+            keep[idx[~ok]] = False
+            idx = idx[ok]
+    return keep
+
+
 def _fit_face(
-    d: F64, sd: F64, e: F64, z: F64, off: F64, w: _EyeWindows
+    d: F64, sd: F64, e: F64, z: F64, off: F64, eye: NDArray[np.int64], w: _EyeWindows
 ) -> tuple[float, float, float, int, float]:
-    """(d, σ_d, e, n, zncc) of one face from its refined windows (the robust fit)."""
-    for _ in range(3):  # robust: drop windows off the face's disparity (eyelashes, occlusions)
-        if len(d) < 3:
-            break
-        med = np.median(d)
-        mad = 1.4826 * np.median(np.abs(d - med))
-        keep = np.abs(d - med) <= np.maximum(3.0 * mad, 3.0 * sd) + 0.02
-        if keep.all():
-            break
-        d, sd, e, z, off = d[keep], sd[keep], e[keep], z[keep], off[keep]
-    if len(d) == 0:
-        return np.nan, np.nan, np.nan, 0, np.nan
+    """(d, σ_d, e, n, zncc) of one face from its refined windows (the robust fit).
+
+    The disparity at the pupil midpoint needs both eyes: one eye's windows measure the face
+    ~IPD/2 off the midpoint, by half the face's disparity gradient (up to ~1 px on a slanted
+    chart at 1 m), which no σ of those windows carries. A face with one eye left is not
+    measured: n = −1 (n = 0: no window left).
+    """
+    keep = _eye_inliers(d, sd, eye)
+    d, sd, e, z, off, eye = d[keep], sd[keep], e[keep], z[keep], off[keep], eye[keep]
+    if not ((eye == 0).any() and (eye == 1).any()):
+        return np.nan, np.nan, np.nan, -1 if len(d) else 0, np.nan
     wts = 1.0 / sd**2
-    # d at the pupil midpoint: a weighted plane d = a + b·Δx + c·Δy when both eyes are measured
-    # (a slanted face), else the weighted mean
-    design = np.column_stack([np.ones(len(d)), off]) if len(d) >= 6 else np.ones((len(d), 1))
+    # d at the pupil midpoint: a weighted plane d = a + b·Δx + c·Δy with enough windows (a
+    # slanted face), else a + b·Δx (the eyes sit about the midpoint along the eye line)
+    design = np.column_stack([np.ones(len(d)), off if len(d) >= 6 else off[:, :1]])
     sw = np.sqrt(wts)
     coef, *_ = np.linalg.lstsq(design * sw[:, None], d * sw, rcond=None)
     cov = np.linalg.pinv(design.T @ (design * wts[:, None]))
@@ -314,8 +339,11 @@ def landmark_disparity(
         else _refine_faces(img, [(pw[i], d0, e0) for i, _, d0, e0 in starts], min_zncc=min_zncc)
     )
     for (i, j, d0, e0), (d, sd, e, n, zn) in zip(starts, refined, strict=True):
-        if n == 0:
-            unmatched.append((i, "no eye window converged in the tele (blur, occlusion, edge)"))
+        if n <= 0:
+            why = "no eye window converged in the tele (blur, occlusion, edge)"
+            if n < 0:
+                why = "one eye only in the tele after the outlier test (its midpoint needs both)"
+            unmatched.append((i, why))
             continue
         mid = pw[i].mean(axis=0)
         out.append(
