@@ -119,7 +119,7 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
         lr = learning.run(cfg, cs, cal, None)
         corr = Corrector([o for c in lr.captures for o in c.observations], cfg,
                          radial_fits=[c.radial for c in lr.captures])
-        err, z_score = [], []
+        err, z_score, rows = [], [], []
         ver = [c for c in cs.captures() if c.kind == "verification"]
         focus = learning.stack_corrections(cfg, cs, ver, cal)  # as evaluate's apply_all does
         for entry in ver:
@@ -133,10 +133,13 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
                 continue
             err.append(r.depth_m / z_true - 1)
             z_score.append(abs(r.depth_m - z_true) / r.sigma_m)
+            rows.append({"capture_id": entry.id, "z_true_m": z_true, "rel_err": err[-1],
+                         "rel_sigma": r.sigma_m / z_true})
     e, zs = np.array(err), np.array(z_score)
     return {
         "flags": flags, "n": len(e), "mean_rel_err": float(e.mean()), "sd_rel_err": float(e.std()),
         "median_abs_rel_err": float(np.median(np.abs(e))), "within_sigma": float(np.mean(zs <= 1)),
+        "captures": rows,
     }
 
 
