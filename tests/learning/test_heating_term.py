@@ -160,3 +160,29 @@ def test_a_drift_the_captures_cannot_tell_widens_the_gain_but_does_not_shift_it(
     res = c - x @ beta
     cov = res @ res / (len(c) - x.shape[1]) * np.linalg.inv(x.T @ x)
     assert np.isclose(term.gain_sigma, np.sqrt(cov[1, 1]), rtol=1e-9)
+
+
+def test_a_slope_the_capture_order_can_fake_is_not_applied_below_3_sigma() -> None:
+    """A warm module (0.07 °C over the set) with no heating drift at all, whose captures carry a
+    small error that follows the placement order (±0.012 px, the same five placements in every
+    layer, taken in order as the module warms): the capture-level fit reads it as a heating slope
+    of 0.83 ± 0.29 px/°C, 2.85σ. Applied (the 2σ rule of session 16) it would move a capture
+    0.02 °C warmer by 0.017 px, and far charts by ~0.3 %; below APPLY_SIGNIFICANCE it is absent
+    and says why (random-1011: −3.9 ± 1.4 px/°C over 0.09 °C cost 0.5 %, docs/module-random.md,
+    session 17). A real slope (K_PX_PER_C above, > 15σ) is still applied."""
+    rng = np.random.default_rng(0)
+    obs = []
+    for g in range(15):
+        z, t = (1.0, 2.0, 3.0)[g // 5], 300.0 + 11.5 * g
+        temp = 35.0 + 0.1 * (1 - np.exp(-(t - 300.0) / 120.0))
+        for _ in range(8):
+            d_true = 18 / z * rng.uniform(0.97, 1.03)
+            x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
+            c = 0.3 - 0.05 * d_true + 0.006 * (g % 5 - 2)
+            obs.append(Observation(x, y, d_true - c + rng.normal(0, 0.02), d_true, z,
+                                   "landscape", "", t, temp, f"c{g}"))
+    term = HeatingTerm.fit(obs)
+    assert 2.0 < abs(term.slope_px_per_c) / term.slope_sigma < 3.0  # what the 2σ rule applied
+    assert not term.ok and "needs 3σ" in term.reason, term.reason
+    assert term.offset_px(35.09)[0] == 0.0
+    assert HeatingTerm.fit(_faces()).ok

@@ -19,7 +19,9 @@ d_i the capture's mean measured disparity, T_i its reported temperature, x̃, �
 sensor position (scaled), T_ref the median learned temperature. The learned observations are
 then referred to T_ref (:meth:`HeatingTerm.normalise`) before the correction is fitted, and a
 capture at temperature T gets k·(T − T_ref) added with σ_k·|T − T_ref|
-(:meth:`HeatingTerm.offset_px`) — when k is significant (|k| > :data:`SIGNIFICANCE` σ_k): a
+(:meth:`HeatingTerm.offset_px`) — when k is significant (|k| > :data:`APPLY_SIGNIFICANCE` σ_k,
+3σ: the captures share their layer's errors, so 2σ slopes are often false, and a false
+correction moves every capture while a real slope left out only widens σ): a
 slope the captures cannot tell from zero would only add its noise to every capture. Without
 temperatures (or too few captures, no spread of temperature, no significant slope) the term is
 absent and says why; the same fit against the capture time then
@@ -73,6 +75,19 @@ MIN_SPAN_S = 20.0
 #: zero; below, the term is absent (random-1010: −0.19 ± 0.39 px/°C applied as a correction
 #: moved the full flow from 0.69 / 1.01 % to 0.97 / 1.76 %; its true heating drift is 0.03 px).
 SIGNIFICANCE = 2.0
+#: A temperature slope is *applied* as a correction only from this many of its σ (between
+#: SIGNIFICANCE and this, the term is absent and the time-indexed σ carries the drift). σ_k is
+#: the capture-level fit's, which takes the captures as independent, yet they share their
+#: distance layer's errors and are taken in one order, layer after layer and placement after
+#: placement, as the module warms: what they share passes for a slope more often than 2σ says.
+#: A correction applied on a false slope moves every later capture by k·(T − T_ref), often ~1 %
+#: at 4 m, while a real slope left out only widens σ. Over the 27 random bench sets (20 warm, 7
+#: learned cold), three slopes passed 2σ: random-1006 learned cold, −0.64 ± 0.13 px/°C (5.1σ;
+#: without it 2.03 % instead of 0.39 %), and two warm sets whose learned temperatures span
+#: 0.09–0.16 °C, random-1011 −3.9 ± 1.4 px/°C (2.7σ; 0.76 % with it, 0.25 % without) and
+#: random-1002 +0.57 ± 0.23 (2.4σ; 0.24 / 0.54 % with it, 0.20 / 0.34 % without)
+#: (docs/module-random.md, session 17).
+APPLY_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)
@@ -167,7 +182,8 @@ class HeatingTerm:
                 break
             use = new
         k, k_sigma = float(beta[2]), float(sd[2])
-        significant = abs(k) > SIGNIFICANCE * k_sigma
+        need = APPLY_SIGNIFICANCE if index == "temperature_c" else SIGNIFICANCE
+        significant = abs(k) > need * k_sigma
         applied = significant and index == "temperature_c"
         # The gain's σ with the drift in the fit; when the drift is significant and not taken
         # out of the observations (an applied temperature term), ⊕ how far it moves the gain.
@@ -176,7 +192,8 @@ class HeatingTerm:
         g_sigma = float(np.hypot(sd[1], shift))
         if not significant:
             return cls(False, f"no significant drift over the learning captures' {index}: "
-                       f"{k:.3g} ± {k_sigma:.2g} px per unit", k, k_sigma, ref, (lo, hi),
+                       f"{k:.3g} ± {k_sigma:.2g} px per unit (needs {need:g}σ)", k, k_sigma,
+                       ref, (lo, hi),
                        int(use.sum()), index, tau_s, g_sigma)
         return cls(True, "", k, k_sigma, ref, (lo, hi), int(use.sum()), index, tau_s, g_sigma)
 
@@ -228,4 +245,6 @@ def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
     return beta, np.sqrt(np.maximum(np.diag(cov), 0.0)), res
 
 
-__all__ = ["MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm"]
+__all__ = [
+    "APPLY_SIGNIFICANCE", "MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm",
+]
