@@ -207,7 +207,7 @@ def test_a_face_is_measured_at_its_midpoint_from_both_eyes_or_not_at_all() -> No
     # A slanted face: d = 30 + 0.012·Δx px, eyes at Δx = ±55 px, so the eyes differ by 1.3 px.
     # Two windows survive on one eye, three on the other (the rest lost to blur or the edge).
     # A test about the face's median used to drop the two as outliers and report the other
-    # eye's mean, 0.66 px off the midpoint's 30 px under a σ of ~0.01 px (random-3000's
+    # eye's mean, 0.64 px off the midpoint's 30 px under a σ of ~0.04 px (random-3000's
     # +0.9 px face); each eye tested about its own median keeps both, and the fit along the
     # eye line reads the midpoint.
     from phonestereo.learning.landmark_disparity import _EyeWindows, _fit_face
