@@ -33,9 +33,10 @@ from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import fit_capture_radial, radial_shift
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_backend
+from phonestereo.flows.face_wt import settle, start_wt
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
 from phonestereo.flows.gates import Gate, capture_gates, first_failed
-from phonestereo.flows.roi_disparity import measure_roi, reference_rectification, tele_view_box
+from phonestereo.flows.roi_disparity import RoiMeasurement, reference_rectification
 from phonestereo.geometry import Rig
 from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
 from phonestereo.io.fingerprint import capture_set_fingerprint
@@ -157,19 +158,6 @@ class LearningResult:
         }
 
 
-def _wt_box(ref: Rectification) -> tuple[int, int, int, int] | None:
-    """The raw-wide box of the face captures' W-T scale fit: everything the tele sees
-    (:func:`~phonestereo.flows.roi_disparity.tele_view_box`, inside the wide image).
-
-    The scale is read from e across the disparity axis, so its error is the matches' e error
-    over their lever (the box's height in tele pixels). The faces' own box (a row of faces, a
-    small lever) scattered the scale by 0.15 % on a ×3.5 periscope (random-1000), ±0.5 px in
-    single face observations; the tele's whole view, 0.04 % (docs/module-random.md).
-    """
-    box = tele_view_box(ref)
-    return box if min(box[2], box[3]) >= 32 else None
-
-
 def learn_face_capture(
     config: FlowConfig,
     cs: CaptureSet,
@@ -198,6 +186,22 @@ def learn_face_capture(
     rect = ref if rig is calibration.rig else reference_rectification(rig, config.mode)
     path_w, path_t = cs.image_paths(entry.id)
     imgs = (read_gray(path_w), read_gray(path_t))  # decoded once for both blocks
+    # the W-T scale's measurement on the helper thread while MediaPipe detects (face_wt)
+    measure, pending = start_wt(config, rig, imgs, rect)
+    try:
+        return _learn(config, cs, entry, rect, imgs, backend, ipd, measure, gates, stages, t0)
+    finally:
+        settle(pending)
+
+
+def _learn(
+    config: FlowConfig, cs: CaptureSet, entry: CaptureEntry, rect: Rectification,
+    imgs: tuple[Any, Any], backend: LandmarkBackend, ipd: IpdMode | None,
+    measure: Callable[[], RoiMeasurement] | None, gates: list[Gate], stages: dict[str, Any],
+    t0: float,
+) -> CaptureLearning:
+    """:func:`learn_face_capture` after its gates: landmarks, landmark disparity, then the W-T
+    scale from ``measure()`` (None: the tele's view is not inside the wide image)."""
     mode = ipd or IpdMode.chart()
     res = learn_capture(
         cs,
@@ -217,13 +221,10 @@ def learn_face_capture(
                                time.perf_counter() - t0)
     radial = None
     if config.wt_scale:
-        box = _wt_box(rect)
         wt = None
         why = "the tele's view is not inside the wide image"
-        if box is not None:
-            match = replace(config.roi.match, max_keypoints=int(config.face_wt_keypoints))
-            roi_cfg = replace(config.roi, expand=1.0, coarse_expand=1.0, match=match)
-            m = measure_roi(rig, imgs[0], imgs[1], box, roi_cfg, rect, mode=config.mode)
+        if measure is not None:
+            m = measure()
             wt = m.wt
             why = m.reason or (wt.reason if wt is not None else "")
         stages["wt_scale"] = None if wt is None else wt.to_dict()
