@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing as mp
+import threading
 
 import cv2
 import numpy as np
@@ -105,3 +106,22 @@ def test_background_on_the_helper_thread_runs_inline() -> None:
     # queue would hang, so it runs there directly.
     inner = _threads.background(lambda: _threads.background(np.add, 1, 2).result())
     assert inner.result(timeout=10) == 3
+
+
+@pytest.mark.parametrize("threads", ["", "1"])
+def test_ahead_runs_apart_and_hands_its_own_work_to_the_helper(
+    monkeypatch: pytest.MonkeyPatch, threads: str
+) -> None:
+    monkeypatch.setenv("PHONESTEREO_THREADS", threads)
+
+    def job() -> tuple[str, str]:
+        inner = _threads.background(lambda: threading.current_thread().name)
+        return threading.current_thread().name, inner.result(timeout=10)
+
+    mine, helper = _threads.ahead(job).result(timeout=10)
+    if not _threads.split_enabled():  # no second core (or turned off): all here
+        assert mine == helper == threading.current_thread().name
+    else:
+        assert mine.startswith("phonestereo-ahead") and helper.startswith("phonestereo-split")
+    with pytest.raises(np.linalg.LinAlgError):
+        _threads.ahead(np.linalg.inv, np.zeros((2, 2))).result(timeout=10)

@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, TypeVar
 
-__all__ = ["background", "run_split", "split_enabled"]
+__all__ = ["ahead", "background", "run_split", "split_enabled"]
 
 T = TypeVar("T")
 
@@ -26,6 +26,8 @@ MIN_SPLIT = 48
 _PREFIX = "phonestereo-split"
 _pool: ThreadPoolExecutor | None = None
 _pool_pid: int | None = None
+_ahead_pool: ThreadPoolExecutor | None = None
+_ahead_pid: int | None = None
 
 
 def split_enabled() -> bool:
@@ -86,3 +88,23 @@ def background(fn: Callable[..., T], *args: Any) -> Future[T]:
     except Exception as exc:  # handed to .result(), as the executor does
         done.set_exception(exc)
     return done
+
+
+def ahead(fn: Callable[..., T], *args: Any) -> Future[T]:
+    """``fn(*args)`` started on a thread of its own (not the helper: its :func:`background`
+    and :func:`run_split` work still goes to the helper, so it uses both cores once they are
+    free), or run here, done, when the split is off.
+
+    For a long job that does not depend on what this thread does next while that leaves a core
+    idle (the learning flow's W-T scale measurement during MediaPipe's landmarks, whose graph
+    computes on its own threads). On the helper itself the job would keep the helper from the
+    work this thread hands it afterwards and run its own helper work in line (at 4000 × 3000
+    the learning's landmark disparity then waited for the whole measurement).
+    """
+    global _ahead_pool, _ahead_pid
+    if not split_enabled() or _on_helper():
+        return background(fn, *args)
+    if _ahead_pool is None or _ahead_pid != os.getpid():  # new process (fork): a fresh thread
+        _ahead_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="phonestereo-ahead")
+        _ahead_pid = os.getpid()
+    return _ahead_pool.submit(fn, *args)

@@ -3,12 +3,14 @@ learn_face_capture`), started before its landmarks.
 
 The learning flow fits the W-T scale (§3.5.1) with :func:`~phonestereo.flows.roi_disparity.
 measure_roi` over everything the tele sees. That measurement reads the images, not the
-landmarks, so :func:`start_wt` runs it on the helper thread
-(:func:`~phonestereo.features._threads.background`) while MediaPipe detects the faces on the
-calling thread: MediaPipe's graph computes on its own threads with the GIL released (the calling
+landmarks, so :func:`start_wt` runs it on a thread of its own
+(:func:`~phonestereo.features._threads.ahead`) while MediaPipe detects the faces on the calling
+thread: MediaPipe's graph computes on its own threads with the GIL released (the calling
 thread's CPU is ~25 of its ~95 ms at 2000 × 1500), and a 2 MP measurement is ~65 ms of a
-~200 ms face capture. The results are those of measuring after the landmarks: ``measure_roi``
-gives the same numbers on any thread, with its helper work run in line there.
+~200 ms face capture. Its helper work (:func:`~phonestereo.features._threads.background`) still
+goes to the helper thread, which the landmark disparity shares once the landmarks are found. The
+results are those of measuring after the landmarks: ``measure_roi`` gives the same numbers on
+any thread.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from dataclasses import replace
 from functools import partial
 from typing import Any
 
-from phonestereo.features._threads import background, split_enabled
+from phonestereo.features._threads import ahead, split_enabled
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.roi_disparity import RoiMeasurement, measure_roi, tele_view_box
 from phonestereo.geometry import Rig
@@ -59,20 +61,20 @@ def start_wt(
 ) -> tuple[Callable[[], RoiMeasurement] | None, Future[RoiMeasurement] | None]:
     """``(measure, pending)``: ``measure()`` gives the capture's :func:`measure_wt` (None: no
     W-T scale, or the tele's view is not inside the wide image); ``pending`` is that measurement
-    already running on the helper thread (None without a second core: ``measure()`` measures
+    already running on its own thread (None without a second core: ``measure()`` measures
     then). Hand ``pending`` to :func:`settle` once the capture is done."""
     box = wt_box(rect) if config.wt_scale else None
     if box is None:
         return None, None
     if not split_enabled():  # nothing to overlap with: measured only if the landmarks need it
         return partial(measure_wt, config, rig, images, box, rect), None
-    pending = background(measure_wt, config, rig, images, box, rect)
+    pending = ahead(measure_wt, config, rig, images, box, rect)
     return pending.result, pending
 
 
 def settle(pending: Future[Any] | None) -> None:
     """Cancel ``pending``, or wait for it when it is running (a capture without faces, or one
-    that raised, does not read it): no measurement of one capture may still run on the helper
+    that raised, does not read it): no measurement of one capture may still run on its
     thread when the next one starts."""
     if pending is not None and not pending.cancel():
         wait([pending])

@@ -186,7 +186,7 @@ def learn_face_capture(
     rect = ref if rig is calibration.rig else reference_rectification(rig, config.mode)
     path_w, path_t = cs.image_paths(entry.id)
     imgs = (read_gray(path_w), read_gray(path_t))  # decoded once for both blocks
-    # the W-T scale's measurement on the helper thread while MediaPipe detects (face_wt)
+    # the W-T scale's measurement on a thread of its own while MediaPipe detects (face_wt)
     measure, pending = start_wt(config, rig, imgs, rect)
     try:
         return _learn(config, cs, entry, rect, imgs, backend, ipd, measure, gates, stages, t0)
