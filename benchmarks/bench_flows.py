@@ -92,8 +92,9 @@ LEARN_BLOCKS = (
     ("learn_face_capture (total)", "flows/learning.py", "learn_face_capture"),
     ("learn_capture (landmark disparity)", "learning/learn.py", "learn_capture"),
     ("  CachedBackend._key (bench artefact)", "flows/learning.py", "_key"),
-    ("measure_roi (W-T scale over the faces)", "flows/roi_disparity.py", "measure_roi"),
-    ("  match_rectified (both blocks)", "features/matching.py", "match_rectified"),
+    # the W-T measure_roi runs on its own thread (flows/face_wt.py, not profiled): this thread
+    # waits for it, and for its helper work, in Future.result
+    ("waits (W-T measure_roi on its own thread, helper)", "concurrent/futures/_base.py", "result"),
     ("Rectification.from_rig (all)", "rectification/rectify.py", "from_rig"),
     ("cv2.remap / maps (all)", "rectification/rectify.py", "remap"),
     ("refine_lk (all)", "features/subpixel.py", "refine_lk"),
