@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from _support.face_chart import write_face_chart_set
 from phonestereo.features._threads import background
 from phonestereo.features.landmarks import Face, FaceResult, LandmarkBackend
 from phonestereo.flows.config import FlowConfig
@@ -23,9 +24,6 @@ from phonestereo.flows.face_wt import settle, start_wt
 from phonestereo.flows.learning import learn_face_capture
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set
-from phonestereo.sim.module import load_module
-from phonestereo.sim.scenarios import LearningConfig, plan_scenario
-from phonestereo.sim.writer import write_capture_set
 
 
 class TruthBackend(LandmarkBackend):
@@ -58,11 +56,7 @@ class TruthBackend(LandmarkBackend):
 @pytest.fixture(scope="module")
 def capture_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One face-chart capture at 1.5 m (noise on, seeded)."""
-    cfg = LearningConfig(distances_m=(1.5,), positions=((0, 0),), attempts=1)
-    plan = plan_scenario("learning", load_module("folded-x3"), seed=5, config=cfg)
-    folder = tmp_path_factory.mktemp("face_wt_set")
-    write_capture_set(folder, plan)
-    return folder
+    return write_face_chart_set(tmp_path_factory.mktemp("face_wt_set"), attempts=1)
 
 
 def _learn(folder: Path, config: FlowConfig) -> Any:

@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 
 import phonestereo.cli  # noqa: F401  (registers every command)
 import phonestereo.flows.learning as flow_mod
+from _support.face_chart import write_face_chart_set
 from phonestereo.cli.app import app
 from phonestereo.errors import ContextError, InputError
 from phonestereo.evaluation.bench import learn_and_apply
@@ -29,9 +30,6 @@ from phonestereo.io import load_calibration, load_capture_set
 from phonestereo.learning.learn import capture_orientation, orientation_bucket
 from phonestereo.learning.observation import FIELDS
 from phonestereo.learning.store import FixStore
-from phonestereo.sim.module import load_module
-from phonestereo.sim.scenarios import LearningConfig, plan_scenario
-from phonestereo.sim.writer import write_capture_set
 
 
 def _result(pupils: list[Any], drop: bool) -> FaceResult:
@@ -77,11 +75,7 @@ class TruthBackend(LandmarkBackend):
 @pytest.fixture(scope="module")
 def capture_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A face-chart stack of 2 captures at 1.5 m (handheld, noise on, seeded)."""
-    cfg = LearningConfig(distances_m=(1.5,), positions=((0, 0),), attempts=2)
-    plan = plan_scenario("learning", load_module("folded-x3"), seed=5, config=cfg)
-    folder = tmp_path_factory.mktemp("learn_set")
-    write_capture_set(folder, plan)
-    return folder
+    return write_face_chart_set(tmp_path_factory.mktemp("learn_set"), attempts=2)
 
 
 def test_orientation_bucket() -> None:
