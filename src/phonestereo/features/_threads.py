@@ -24,10 +24,9 @@ T = TypeVar("T")
 MIN_SPLIT = 48
 
 _PREFIX = "phonestereo-split"
-_pool: ThreadPoolExecutor | None = None
-_pool_pid: int | None = None
-_ahead_pool: ThreadPoolExecutor | None = None
-_ahead_pid: int | None = None
+_AHEAD = "phonestereo-ahead"
+#: thread-name prefix → (pid that made it, its single-thread pool)
+_pools: dict[str, tuple[int, ThreadPoolExecutor]] = {}
 
 
 def split_enabled() -> bool:
@@ -46,12 +45,14 @@ def _on_helper() -> bool:
     return threading.current_thread().name.startswith(_PREFIX)
 
 
-def _executor() -> ThreadPoolExecutor:
-    global _pool, _pool_pid
-    if _pool is None or _pool_pid != os.getpid():  # new process (fork): a fresh thread
-        _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=_PREFIX)
-        _pool_pid = os.getpid()
-    return _pool
+def _executor(prefix: str = _PREFIX) -> ThreadPoolExecutor:
+    """This process's single-thread pool named ``prefix`` (the helper's by default)."""
+    pid = os.getpid()
+    made = _pools.get(prefix)
+    if made is None or made[0] != pid:  # first use, or a new process (fork): a fresh thread
+        made = (pid, ThreadPoolExecutor(max_workers=1, thread_name_prefix=prefix))
+        _pools[prefix] = made
+    return made[1]
 
 
 def run_split(
@@ -101,10 +102,6 @@ def ahead(fn: Callable[..., T], *args: Any) -> Future[T]:
     work this thread hands it afterwards and run its own helper work in line (at 4000 × 3000
     the learning's landmark disparity then waited for the whole measurement).
     """
-    global _ahead_pool, _ahead_pid
     if not split_enabled() or _on_helper():
         return background(fn, *args)
-    if _ahead_pool is None or _ahead_pid != os.getpid():  # new process (fork): a fresh thread
-        _ahead_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="phonestereo-ahead")
-        _ahead_pid = os.getpid()
-    return _ahead_pool.submit(fn, *args)
+    return _executor(_AHEAD).submit(fn, *args)
