@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from phonestereo.errors import InputError
 from phonestereo.fixes.distortion import RadialResidualFix
@@ -167,6 +168,22 @@ APPLY_ONLY = (
 ALL_BUCKETS = "all"
 
 
+def _within_variance(samples: Sequence[tuple[float, int]]) -> float:
+    """A robust pooled variance from sample variances on few degrees of freedom:
+    (s², k) pairs → median of s² / (median(χ²_k) / k), px² (0 without samples).
+
+    The plain median of s² is biased low when k is small (median(χ²_1) = 0.455), which left
+    part of the faces' own noise in the capture scatter.
+
+    >>> round(_within_variance([(0.455, 1), (0.693, 2), (0.789, 3)]), 2)  # each at its median
+    1.0
+    """
+    if not samples:
+        return 0.0
+    s2, k = np.asarray(samples, dtype=np.float64).T
+    return float(np.median(s2 / (chi2.median(k) / k)))
+
+
 def _narrow(obs: np.ndarray) -> bool:
     """True when the learned disparities span too little (< 25 % of their level, e.g. faces at
     one distance) for a gain over disparity: the field then fits none instead of noise."""
@@ -251,7 +268,10 @@ class Corrector:
         capture's mean also carries its faces' own scatter (ruler and landmarks) over their
         number n, which a new capture does not: the pooled within-capture variance / n is
         taken out of the spread's square (over the 28 bench sets 0.014–0.126 px → 0–0.105 px,
-        zero on 14 of them; docs/module-random.md, session 13).
+        zero on 14 of them; docs/module-random.md, session 13). A capture of n faces gives its
+        variance on n − 1 degrees of freedom, whose median is only 0.45 (1 dof) to 0.84 (4 dof)
+        of the true variance, so each is divided by its χ² median per dof before the median is
+        taken (:func:`_within_variance`); the bench's face captures hold 2–5 faces.
         """
         obs = self.observations
         if obs.size == 0:
@@ -269,13 +289,12 @@ class Corrector:
                     means.append(float(np.mean(rc)))
                     counts.append(rc.size)
                     if rc.size > 1:
-                        within.append(float(np.var(rc, ddof=1)))
+                        within.append((float(np.var(rc, ddof=1)), rc.size - 1))
         if len(means) < 4:
             return 0.0
         m = np.asarray(means)
         between = (1.4826 * float(np.median(np.abs(m - np.median(m))))) ** 2
-        noise = (float(np.median(within)) * float(np.mean(1.0 / np.asarray(counts)))
-                 if within else 0.0)
+        noise = _within_variance(within) * float(np.mean(1.0 / np.asarray(counts)))
         return float(np.sqrt(max(between - noise, 0.0)))
 
     def _extent(self, bucket: str) -> LearnedExtent:
