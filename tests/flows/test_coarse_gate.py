@@ -12,7 +12,7 @@ import pytest
 
 from phonestereo.flows.coarse import coarse_search, peak_contrast
 from phonestereo.flows.coarse_gate import coarse_peak
-from phonestereo.flows.roi_config import RoiConfig
+from phonestereo.flows.roi_config import RoiConfig, reaching
 
 BOX = (130, 50, 404, 500)
 
@@ -151,3 +151,19 @@ def test_two_disparity_bands_on_one_surface_are_no_measurement() -> None:
     # ~200 beside the band of ~200 (ratio ~1 ≥ max_band_split 0.5), 1.4 px away (±0.1).
     assert abs(split["band_gap_x10"] - 14) <= 1
     assert "two disparities" in band_reason(split, RoiConfig())
+
+
+def test_a_far_point_beyond_minus_2_px_is_found_once_the_learned_correction_reaches_it() -> None:
+    """random-3004's calibration reads disparities 7.5 px low (its learned correction is
+    +7.5 px), so its charts from 3.2 m measured −1.9 to −3.1 px and every one was gated
+    "beyond infinity" by a search that stopped at −2 px. The application lowers the far end by
+    the learned correction (to −⌈7.5⌉ − 1 px, :func:`~phonestereo.flows.roi_config.reaching`)."""
+    rng = np.random.default_rng(2)
+    left = cv2.GaussianBlur(rng.uniform(0, 255, (600, 700)), (0, 0), 2.0).astype(np.float32)
+    right = _tele(left, -5.0, 1.0, rng)  # a point at 4 m: true 2.5 px − 7.5 px
+    default = coarse_peak(left, right, [BOX], 64, RoiConfig())
+    assert "beyond infinity" in default.reason and "more than 2 px" in default.reason
+    cfg = reaching(RoiConfig(), 7.5)
+    assert cfg.far_disparity_px == -9
+    found = coarse_peak(left, right, [BOX], 64, cfg)
+    assert found.reason == "" and abs(found.peak.d + 5.0) <= 1.0, (found.reason, found.peak)

@@ -116,6 +116,29 @@ def test_application_gates_and_failures_are_results() -> None:
     assert not flat.ok and flat.gate == "measure" and "texture" in flat.reason
 
 
+def test_the_roi_search_reaches_where_a_positive_learned_correction_puts_far_points(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A far point reads d = −correction: the application lowers the searched far end by a
+    positive typical correction (+6.3 px here: −2 → −8) and leaves a negative one's alone."""
+    seen = []
+
+    def measure(*args: object, **kw: object) -> object:
+        seen.append(args[4])
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr(application, "measure_roi", measure)
+    cal = Calibration(_rig())
+    img = np.zeros((1500, 2000), np.uint8)
+    for offset, far in ((6.2, -8), (-2.5, -2)):
+        corr = Corrector(_obs(offset=offset), FlowConfig())
+        assert abs(corr.typical_px("landscape") - offset - 0.01 * 13) < 0.05  # + gain · d̄
+        with pytest.raises(RuntimeError, match="stop"):
+            application.run(FlowConfig(), application.ApplicationInputs(
+                cal, _entry(), img, img, corrector=corr))
+        assert seen[-1].far_disparity_px == far
+
+
 def test_roi_outside_the_image_is_an_input_error() -> None:
     img = np.zeros((1500, 2000), np.uint8)
     with pytest.raises(Exception, match="not inside"):

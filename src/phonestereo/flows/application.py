@@ -33,6 +33,7 @@ from phonestereo.fixes.breathing import correct_depth, focus_sigma_rel
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
+from phonestereo.flows.roi_config import reaching
 from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
 from phonestereo.io import Calibration, CaptureEntry
 from phonestereo.learning.learn import capture_orientation
@@ -141,12 +142,17 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     radial = inputs.corrector.radial if inputs.corrector is not None else None
     if radial is not None:  # §3.2, learned (fixes/radial_residual.py)
         stages["radial_residual"] = radial.to_dict()
+    roi_cfg = config.roi
+    if config.learned_correction and inputs.corrector is not None:
+        # A far point reads d = −correction: a positive one takes it beyond the searched
+        # −2 px (random-3004: +7.5 px, every chart from 3.2 m gated "beyond infinity").
+        roi_cfg = reaching(roi_cfg, inputs.corrector.typical_px(orientation))
     m = measure_roi(
         rig,
         inputs.image_wide,
         inputs.image_tele,
         box,
-        config.roi,
+        roi_cfg,
         ref,
         mode=config.mode,
         wt_scale=config.wt_scale,

@@ -54,7 +54,8 @@ def coarse_verdict(
         return (
             f"the correlation is highest at the far end of the searched disparities "
             f"({cp.d:.0f} px, beyond infinity): the calibration's disparity is off by more "
-            "than 2 px — recalibrate, or a repetitive texture; aim at a distinct object"
+            f"than {-cfg.far_disparity_px} px — recalibrate (or learn from faces), or a "
+            "repetitive texture; aim at a distinct object"
         ), None
     if cp.second >= cfg.max_ambiguity * cp.peak:
         return (
@@ -111,7 +112,7 @@ def _first_usable(
         else:
             if before is not None:
                 before(cbox)
-            cp = coarse_search(lw, rt, cbox, -2, d_max, rows=cfg.coarse_rows)
+            cp = coarse_search(lw, rt, cbox, cfg.far_disparity_px, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg, maps if i == 0 else None)
         if not why:
             break
@@ -163,7 +164,7 @@ def coarse_peak(
     p0: CoarsePeak | None = None
     maps: list[TileMaps] = []  # the tiles' ±8 px maps about p0: the tile test's first peak
     if center is not None:
-        p0 = coarse_search(lw, rt, b0, -2, d_max, rows=cfg.coarse_rows)
+        p0 = coarse_search(lw, rt, b0, cfg.far_disparity_px, d_max, rows=cfg.coarse_rows)
         if np.isfinite(p0.d):
             s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1], keep=maps)
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
@@ -177,7 +178,8 @@ def coarse_peak(
             rt_s = rt.copy()
 
             def fill(b: Box) -> None:
-                x0, y0, x1, y1 = part = coarse_reads(b, -2, d_max, cfg.coarse_rows, size)
+                x0, y0, x1, y1 = part = coarse_reads(b, cfg.far_disparity_px, d_max,
+                                                     cfg.coarse_rows, size)
                 if cover is not None:
                     cover.cover_box(b)
                     cover.cover_right(preimage(part, s, center, size))

@@ -326,6 +326,15 @@ class Corrector:
             return 0
         return int(np.sum(self.observations["orientation"] == self.bucket(orientation)))
 
+    def typical_px(self, orientation: str) -> float:
+        """The median learned correction d_expected − d_measured in the capture's bucket, px
+        (0 without observations): a far point's measured disparity is about its negative."""
+        ob = self.observations
+        ob = ob[ob["orientation"] == self.bucket(orientation)] if ob.size else ob
+        c = ob["d_expected_px"] - ob["d_measured_px"] if ob.size else np.zeros(0)
+        c = c[np.isfinite(c)]
+        return float(np.median(c)) if c.size else 0.0
+
     def correct(
         self, query: Any, orientation: str, temperature_c: float | None = None,
         time_s: float | None = None,

@@ -26,6 +26,12 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "Nearest depth searched; sets the largest disparity.",
             "0.4 m: the closest a phone's tele focuses.",
         ),
+        "far_disparity_px": (
+            "px",
+            "Smallest disparity searched; the application lowers it by a positive learned "
+            "correction (a far point then reads −correction).",
+            "−2 px: a little beyond infinity, for a calibration off by up to 2 px.",
+        ),
         "majority_bin_px": (
             "px",
             "Histogram bin of the majority-disparity vote.",

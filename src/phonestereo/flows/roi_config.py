@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 from phonestereo.features.matching import MatchConfig
 
@@ -20,6 +21,12 @@ class RoiConfig:
     expand: float = 1.6
     #: Nearest depth searched (sets the largest disparity).
     z_min_m: float = 0.4
+    #: The smallest disparity searched, px: −2, a little beyond infinity, for a calibration whose
+    #: disparity is off by up to 2 px. The application flow lowers it to reach −correction − 1
+    #: where a learned correction is positive (a far point reads −correction: random-3004's +7.5
+    #: px put its charts from 3.2 m beyond −2 px, :func:`reaching`), so the default is only what
+    #: an unlearned ROI needs.
+    far_disparity_px: int = -2
     #: ``majority_bin_px``, ``majority_tol_px``, ``majority_tol_rel``: Histogram bin of the majority
     #: vote and the band kept about it (max of px, relative).
     majority_bin_px: float = 0.5
@@ -76,3 +83,20 @@ class RoiConfig:
             lr_check=False,
         )
     )
+
+
+def reaching(cfg: RoiConfig, correction_px: float) -> RoiConfig:
+    """``cfg`` with the searched disparities reaching a learned correction's far points: the
+    measured disparity of a far point is −correction, so ``far_disparity_px`` becomes at most
+    −⌈correction⌉ − 1 (a pixel beyond infinity: the correction is known to a few tenths). A
+    correction below 1 px, or negative, leaves it (the near end, from ``z_min_m``, has room to
+    spare); random-1010 (+0.5 px) lost 3 charts whose coarse ZNCC sits at the 0.5 threshold
+    when its search was widened by 1 px for nothing.
+
+    >>> [reaching(RoiConfig(), c).far_disparity_px for c in (7.5, 2.1, 0.5, -3.0, float("nan"))]
+    [-9, -4, -2, -2, -2]
+    """
+    if not math.isfinite(correction_px):
+        return cfg
+    far = min(cfg.far_disparity_px, -math.ceil(correction_px) - 1)
+    return replace(cfg, far_disparity_px=far) if far != cfg.far_disparity_px else cfg

@@ -8,9 +8,8 @@ own matches selects the surface the user pointed at, the expanded ROI's matches 
 surface are kept, and a robust plane d = a + b·x + c·y (exact for a planar surface in a perfect
 rectification: 1/Z is affine in the image; with enough matches plus the quadratic terms that a
 factory calibration's distortion error leaves, :func:`fit_plane`) gives the disparity over the
-ROI with its σ. Every coordinate returned is
-in the *reference* rectified frame (:func:`reference_rectification`: canonical, shared field
-of view), the frame the fix store's observations live in.
+ROI with its σ. Every coordinate returned is in the *reference* rectified frame
+(:func:`reference_rectification`: canonical, shared field of view), the fix store's frame.
 """
 
 from __future__ import annotations
@@ -51,7 +50,6 @@ F64 = Array
 def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
     """The reference rectified frame of a calibration: ``mode``, shared field of view."""
     return Rectification.from_rig(rig, mode)
-
 
 
 @dataclass(frozen=True)
@@ -165,7 +163,8 @@ def _window(
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
     big = _expanded(roi, cfg.expand, rig.wide.size)
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
-    opts = RectifyOptions(roi=wide_box, margin_px=d_max + 12, grid_step_px=cfg.map_step_px)
+    margin = max(d_max, -cfg.far_disparity_px) + 12
+    opts = RectifyOptions(roi=wide_box, margin_px=margin, grid_step_px=cfg.map_step_px)
     win = Rectification.from_rig(rig, mode, opts)
     # the tele's maps on the helper thread while this one places the boxes (measure_roi's
     # tele source is queued behind them there; the wide's maps are built on this thread)
@@ -186,7 +185,8 @@ def _window(
     # The coarse box: inside what the tele sees (a rotated or narrow tele leaves black corners
     # in the bounding box), else — or when that one is ambiguous — the bounding box.
     bbox = _bounding_box(wide_pts, win.wide_rect.size)
-    inner = inscribed_box(wide_outline, tele_outline(win), (-2.0, float(d_max)), win.wide_rect.size)
+    span = (float(cfg.far_disparity_px), float(d_max))
+    inner = inscribed_box(wide_outline, tele_outline(win), span, win.wide_rect.size)
     cboxes = [b for b in (inner, bbox) if b is not None]
     if inner == bbox:
         cboxes = [bbox]

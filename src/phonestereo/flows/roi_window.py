@@ -189,10 +189,12 @@ def _resampled(
 def two_passes(box: tuple[int, int, int, int], d_max: int, cfg: RoiConfig,
                size: tuple[int, int]) -> bool:
     """Whether the coarse step reads a cubic window and the fine part is resampled again
-    (:func:`fine_window`): when the fine part (bounded by the whole searched range −2 … d_max
-    and the coarse rows) is a small share of the window of ``size`` (W, H)."""
+    (:func:`fine_window`): when the fine part (bounded by the whole searched range
+    ``far_disparity_px`` … d_max and the coarse rows) is a small share of the window of
+    ``size`` (W, H)."""
     W, H = size
-    x0, y0, x1, y1 = _fine_part(box, -2 - cfg.fine_range_px, d_max + cfg.fine_range_px,
+    x0, y0, x1, y1 = _fine_part(box, cfg.far_disparity_px - cfg.fine_range_px,
+                                d_max + cfg.fine_range_px,
                                 cfg.coarse_rows, cfg, (W, H))
     return (x1 - x0) * (y1 - y0) <= MAX_FINE_SHARE * W * H
 
@@ -219,7 +221,8 @@ def coarse_lazy(
     H, W = sources[0].map_x.shape
     if not two_passes(box, d_max, cfg, (W, H)):
         return None
-    pair = LazyPair(sources, COARSE_INTERPOLATION, d_max, cfg.coarse_rows, tele_like)
+    pair = LazyPair(sources, COARSE_INTERPOLATION, (cfg.far_disparity_px, d_max),
+                    cfg.coarse_rows, tele_like)
     pair.cover_box(first_box)
     return pair
 

@@ -34,14 +34,15 @@ class LazyPair:
     filled in place as the coarse step asks for parts of it."""
 
     def __init__(
-        self, sources: tuple[Source, Source | Future[Source]], interpolation: str, d_max: int,
-        rows: int, tele_like: Any = None,
+        self, sources: tuple[Source, Source | Future[Source]], interpolation: str,
+        span: tuple[int, int], rows: int, tele_like: Any = None,
     ) -> None:
         """``sources[1]`` may be the helper thread's pending tele :class:`Source` (the left's
-        part is then resampled here while it is prepared); ``tele_like``: an array of the
-        tele's dtype and channels (default: the tele source's image)."""
+        part is then resampled here while it is prepared); ``span``: the searched disparities
+        (d_min, d_max), px; ``tele_like``: an array of the tele's dtype and channels (default:
+        the tele source's image)."""
         self.sources, self.interpolation = sources, interpolation
-        self.d_max, self.rows = d_max, rows
+        self.span, self.rows = span, rows
         self.H, self.W = sources[0].map_x.shape
         self.left = self._empty(sources[0].image)
         self.right = self._empty(self._source(1).image if tele_like is None else tele_like)
@@ -84,7 +85,7 @@ class LazyPair:
         behind a pending tele source; the left here first)."""
         x, y, w, h = box
         lp = self._missing(0, (x, y, x + w, y + h))
-        rp = self._missing(1, coarse_reads(box, -2, self.d_max, self.rows, (self.W, self.H),
+        rp = self._missing(1, coarse_reads(box, *self.span, self.rows, (self.W, self.H),
                                            RIGHT_REACH))
         rx0, ry0, rx1, ry1 = rp
         n_left = max(lp[2] - lp[0], 0) * max(lp[3] - lp[1], 0)
