@@ -10,7 +10,9 @@ so learned and applied disparities share one convention) → with ``radial_resid
 :mod:`~phonestereo.fixes.radial_residual`) → **observations into the fix
 store**, one transaction per capture, under the store's context for this calibration and
 flow configuration (:mod:`~phonestereo.learning.store_contexts`) and keyed by the capture
-set's fingerprint. Captures that do not pass are skipped with the reason.
+set's fingerprint. Captures that do not pass are skipped with the reason; those whose faces
+missed the IPD's disparity gate are tried once more about the corrections the others taught
+(:func:`run`).
 
 This is the only way observations are made (``learn``, ``batch learn`` and ``evaluate``
 alike; ``tests/test_architecture.py`` fails if another module writes to the store). The
@@ -21,7 +23,7 @@ plane) or real faces of unknown IPD (the population prior, each head on its own)
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
@@ -36,6 +38,7 @@ from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_
 from phonestereo.flows.face_wt import settle, start_wt
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
 from phonestereo.flows.gates import Gate, capture_gates, first_failed
+from phonestereo.flows.roi_config import reaching
 from phonestereo.flows.roi_disparity import RoiMeasurement, reference_rectification
 from phonestereo.geometry import Rig
 from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
@@ -168,14 +171,19 @@ def learn_face_capture(
     focus: FocusCorrection | None = None,
     ipd: IpdMode | None = None,
     reference: Rectification | None = None,
+    d_offset_px: float = 0.0,
 ) -> CaptureLearning:
-    """The learning blocks of one face capture (module docstring)."""
+    """The learning blocks of one face capture (module docstring); ``d_offset_px``: the
+    calibration's known disparity offset, px (the faces are gated about it,
+    :func:`~phonestereo.learning.landmark_disparity.landmark_disparity`)."""
     t0 = time.perf_counter()
     gates = capture_gates(entry, warmup_s=config.warmup_s, heating=config.heating_gate)
     bad = first_failed(gates)
     if bad is not None:
         return CaptureLearning(entry.id, (), bad.name, bad.reason, gates=tuple(gates))
     stages: dict[str, Any] = {}
+    if d_offset_px > 0:  # far points read d = −offset: the W-T's view is searched there too
+        config = replace(config, roi=reaching(config.roi, d_offset_px))
     rig = calibration.rig
     if config.focus_calibration and focus is not None:
         rig = focus.apply(rig)
@@ -189,7 +197,8 @@ def learn_face_capture(
     # the W-T scale's measurement on a thread of its own while MediaPipe detects (face_wt)
     measure, pending = start_wt(config, rig, imgs, rect)
     try:
-        return _learn(config, cs, entry, rect, imgs, backend, ipd, measure, gates, stages, t0)
+        return _learn(config, cs, entry, rect, imgs, backend, ipd, measure, gates, stages, t0,
+                      d_offset_px)
     finally:
         settle(pending)
 
@@ -198,7 +207,7 @@ def _learn(
     config: FlowConfig, cs: CaptureSet, entry: CaptureEntry, rect: Rectification,
     imgs: tuple[Any, Any], backend: LandmarkBackend, ipd: IpdMode | None,
     measure: Callable[[], RoiMeasurement] | None, gates: list[Gate], stages: dict[str, Any],
-    t0: float,
+    t0: float, d_offset_px: float = 0.0,
 ) -> CaptureLearning:
     """:func:`learn_face_capture` after its gates: landmarks, landmark disparity, then the W-T
     scale from ``measure()`` (None: the tele's view is not inside the wide image)."""
@@ -213,8 +222,10 @@ def _learn(
         chart_pitch_m=mode.pitch_m,
         backend=backend,
         images=imgs,
+        d_offset_px=d_offset_px,
     )
-    stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s}
+    stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s,
+                           "wide_faces": res.disparity.n_wide if res.disparity else 0}
     obs = res.observations
     if not obs:
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
@@ -276,6 +287,24 @@ def stack_corrections(
     return out
 
 
+#: A learning run retries the face captures whose faces found no partner with the gates
+#: centred on the typical correction of those it learned, when that is at least this far from 0
+#: (px): half the gate's fixed part (``d_tol_px`` 4 px); nearer, the gates hold it already.
+RETRY_OFFSET_PX = 2.0
+
+
+def _gated_faces(r: CaptureLearning) -> bool:
+    """The wide found faces, yet none was measured in the tele."""
+    return r.gate == "faces" and r.stages.get("landmarks", {}).get("wide_faces", 0) > 0
+
+
+def typical_correction(captures: Sequence[CaptureLearning]) -> float:
+    """The median correction d_expected − d_measured over the learned captures'
+    observations, px (0 without any)."""
+    c = [o.d_expected_px - o.d_measured_px for r in captures if r.ok for o in r.observations]
+    return float(np.median(c)) if c else 0.0
+
+
 def run(
     config: FlowConfig,
     cs: CaptureSet,
@@ -331,32 +360,26 @@ def run(
     det = backend if backend is not None else default_backend()
     corr = stack_corrections(config, cs, faces, calibration)
     ref = reference_rectification(calibration.rig, config.mode)
-    out, n_obs = [], 0
-    for k, entry in enumerate(faces):
-        r = learn_face_capture(
-            config,
-            cs,
-            entry,
-            calibration,
-            det,
-            focus=corr.get(entry.id),
-            ipd=mode,
-            reference=ref,
-        )
-        out.append(r)
+    def learn(entry: CaptureEntry, offset: float = 0.0) -> CaptureLearning:
+        r = learn_face_capture(config, cs, entry, calibration, det, focus=corr.get(entry.id),
+                               ipd=mode, reference=ref, d_offset_px=offset)
         if r.ok and store is not None:
-            n_obs += store.add_capture(
-                entry.id,
-                list(r.observations),
-                context_id=context_id,
-                set_fingerprint=fingerprint,
-                set_folder=str(cs.root.resolve()),
-                radial=r.radial,
-            )
-        elif r.ok:
-            n_obs += len(r.observations)
+            store.add_capture(entry.id, list(r.observations), context_id=context_id,
+                              set_fingerprint=fingerprint, set_folder=str(cs.root.resolve()),
+                              radial=r.radial)
+        return r
+
+    out = []
+    for k, entry in enumerate(faces):
+        out.append(learn(entry))
         if progress is not None:
             progress(k + 1, len(faces), entry.id)
+    # Faces are gated about the disparity their IPD predicts; a calibration off by more than
+    # the gate (random-3004: +7.5 px) loses its far faces. The captures learned say by how much.
+    offset = typical_correction(out)
+    if abs(offset) >= RETRY_OFFSET_PX:
+        out = [learn(e, offset) if _gated_faces(r) else r for e, r in zip(faces, out, strict=True)]
+    n_obs = sum(len(r.observations) for r in out if r.ok)
     seconds = time.perf_counter() - t0
     return LearningResult(tuple(out), n_obs, seconds, mode, context_id, fingerprint)
 

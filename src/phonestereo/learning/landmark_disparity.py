@@ -267,6 +267,7 @@ def landmark_disparity(
     d_tol_px: float = 4.0,
     d_tol_rel: float = 0.35,
     min_zncc: float = 0.8,
+    d_offset_px: float = 0.0,
 ) -> LandmarkDisparityResult:
     """Per-face disparity at the eyes and the disparity its IPD depth predicts (§4.1.3).
 
@@ -288,6 +289,9 @@ def landmark_disparity(
         Matching gates, see :func:`match_faces`.
     min_zncc : float
         Windows below this ZNCC after refinement are not used.
+    d_offset_px : float
+        How far the calibration's disparities are known to read below the truth (a learned
+        correction's typical value, px): the gates centre on ``f·B/Z_IPD − d_offset_px``.
 
     Returns
     -------
@@ -302,7 +306,8 @@ def landmark_disparity(
     d_lm, e_lm = diff[..., 0].mean(axis=2), diff[..., 1].mean(axis=2)
     z, d_exp = ipd_depths(faces_wide, rect, ipd_m, depth_mode, chart_pitch_m)
     pairs = match_faces(
-        d_lm, e_lm, d_exp, max_e_px=max_e_px, d_tol_px=d_tol_px, d_tol_rel=d_tol_rel
+        d_lm + d_offset_px, e_lm, d_exp, max_e_px=max_e_px, d_tol_px=d_tol_px,
+        d_tol_rel=d_tol_rel,
     )
     matched = {i for i, _ in pairs}
     # Faces without a tele partner (Face Mesh failed on a face that fills the tele, the face
@@ -314,7 +319,8 @@ def landmark_disparity(
              for i, j in pairs]
     for i in lone:
         tol = d_tol_px + d_tol_rel * abs(float(d_exp[i]))
-        reach.append(FaceReach(pw[i], d_exp[i] - tol - 5.0, d_exp[i] + tol + 5.0, max_e_px + 3.0))
+        d_gate = d_exp[i] - d_offset_px
+        reach.append(FaceReach(pw[i], d_gate - tol - 5.0, d_gate + tol + 5.0, max_e_px + 3.0))
     img = prepare(rect, image_wide, image_tele, reach) if pairs or lone else None
     out: list[FaceDisparity] = []
     unmatched: list[tuple[int, str]] = []
@@ -328,7 +334,7 @@ def landmark_disparity(
             continue
         assert img is not None
         start, why = search_start(rect, img.left, img.right, pw[i], float(d_exp[i]),
-                                  d_tol_px, d_tol_rel, max_e_px)
+                                  d_tol_px, d_tol_rel, max_e_px, offset_px=d_offset_px)
         if start is None:
             unmatched.append((i, tele_why + why))
         else:

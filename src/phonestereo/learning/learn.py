@@ -94,6 +94,7 @@ def learn_capture(
     backend: LandmarkBackend | None = None,
     guided: bool = True,
     images: tuple[Any, Any] | None = None,
+    d_offset_px: float = 0.0,
 ) -> LearnResult:
     """Learn the disparity observations of one face capture.
 
@@ -123,6 +124,9 @@ def learn_capture(
         tele image too.
     images : (wide, tele) arrays, optional
         The capture's decoded images, when the caller has them (else read from the set).
+    d_offset_px : float
+        The calibration's known disparity offset, px (see
+        :func:`~phonestereo.learning.landmark_disparity.landmark_disparity`).
 
     Returns
     -------
@@ -148,7 +152,7 @@ def learn_capture(
     t1 = time.perf_counter()
     res = landmark_disparity(
         rect, img_w, img_t, faces_w, faces_t, ipd_m=ipd_m, depth_mode=depth_mode,
-        chart_pitch_m=chart_pitch_m,
+        chart_pitch_m=chart_pitch_m, d_offset_px=d_offset_px,
     )
     t2 = time.perf_counter()
     timing = {"detect": t1 - t0, "disparity": t2 - t1, "total": t2 - t0}

@@ -30,16 +30,19 @@ def search_start(
     d_tol_rel: float,
     max_e_px: float,
     min_score: float = 0.6,
+    offset_px: float = 0.0,
 ) -> tuple[tuple[float, float] | None, str]:
     """The landmark (d, e) of a wide face without a tele partner, searched from its rectified
     pupils (2, 2) in the rectified pair ``left`` (wide), ``right`` (tele) (float32): one window
     per eye, NCC over the expected-disparity gate of
-    :func:`~phonestereo.learning.landmark_disparity.match_faces`; both eyes must be in the
-    tele's image and agree within 2 px.
+    :func:`~phonestereo.learning.landmark_disparity.match_faces` (centred on
+    ``d_expected − offset_px``: the calibration's known disparity offset); both eyes must be in
+    the tele's image and agree within 2 px.
 
     Returns ((d, e), "") or (None, the reason).
     """
     tol = d_tol_px + d_tol_rel * abs(d_expected)
+    d_expected = d_expected - offset_px
     guess = pupils - [d_expected, 0.0]
     raw = rect.unrectify_tele(guess)
     w, h = rect.rig.tele.size
@@ -57,6 +60,12 @@ def search_start(
         lr_min_score=np.inf,
     )
     ok = s.searched & ~s.at_edge & np.isfinite(s.d0) & (s.score >= min_score)
+    if not ok.all() and (s.at_edge & (s.score >= min_score)).any():
+        return None, (
+            "no tele face landmarks and the eyes correlate best at the end of the disparities "
+            f"the IPD allows ({d_expected - tol:.0f} to {d_expected + tol:.0f} px): the "
+            "calibration's disparity is off by more than that, or the IPD is far from assumed"
+        )
     if not ok.all():
         return None, (
             "no tele face landmarks and the eyes do not correlate with the tele "
