@@ -113,7 +113,11 @@ def match(
     min_disparity: Annotated[int, typer.Option(help="Smallest disparity searched, px.")] = 0,
     detector: Annotated[str, typer.Option(help=f"Keypoints: {', '.join(DETECTORS)}.")] = "dog",
     max_keypoints: Annotated[
-        int | None, typer.Option(help="Keypoints searched at most (default 2000; 400 with --fast).")
+        int | None,
+        typer.Option(
+            help=f"Keypoints searched at most (default {MatchConfig.max_keypoints}; "
+            f"{MatchConfig.fast().max_keypoints} with --fast)."
+        ),
     ] = None,
     fast: Annotated[
         bool, flag("--fast", "Speed preset: fewer keypoints, translation-only fit.")

@@ -35,7 +35,7 @@ from phonestereo.evaluation.batch import (
     run_batch,
 )
 from phonestereo.evaluation.runner import check_address, dask_client
-from phonestereo.evaluation.study import StudyConfig, run_study
+from phonestereo.evaluation.study import METRICS, StudyConfig, run_study
 from phonestereo.evaluation.study_bench import AnalyticBenchConfig, get_bench
 from phonestereo.evaluation.tolerances import load_tolerances
 from phonestereo.sim.module import load_module
@@ -155,7 +155,7 @@ def study(
         ),
     ] = False,
     metric: Annotated[
-        str, typer.Option("--metric", help="Ranked metric: median_rel_err | p90_rel_err.")
+        str, typer.Option("--metric", help=f"Ranked metric: {' | '.join(METRICS)}.")
     ] = "median_rel_err",
     independent_phones: Annotated[
         bool,

@@ -37,6 +37,7 @@ from phonestereo.errors import InputError
 from phonestereo.geometry.checks import Array, as_points
 
 UNDISTORT_TOL = 1e-12
+MAX_RADIAL_TERMS = 10  # most radial terms k1 … kn of a model with a variable number of them
 VALID_RADIUS_MAX = 20.0  # normalised radius scanned for the valid field (87° off axis)
 
 
@@ -47,6 +48,12 @@ class LensModel(ABC):
     #: tuple of float. Model coefficients in the order of the model's docstring.
     coefficients: tuple[float, ...]
     name: ClassVar[str] = ""
+    #: The coefficients' names in their order, for a model with a fixed number of them (OpenCV's);
+    #: :attr:`n_range`, :attr:`layout` and :attr:`p1_index` follow from them.
+    coefficient_names: ClassVar[tuple[str, ...]] = ()
+    #: Or, for a model with n radial terms k1 … kn first (1 ≤ n ≤ :data:`MAX_RADIAL_TERMS`), the
+    #: names of the coefficients after them; the same three follow from these.
+    after_radial: ClassVar[tuple[str, ...]] = ()
     #: Fewest and most coefficients the model takes.
     n_range: ClassVar[tuple[int, int]] = (0, 0)
     #: The coefficients the model takes, as its count error names them.
@@ -54,6 +61,21 @@ class LensModel(ABC):
     #: Index of p1 in :attr:`coefficients`, p2 following it (2: OpenCV's order k1, k2, p1, p2, …);
     #: negative: counted from the end.
     p1_index: ClassVar[int] = 2
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Set a model's :attr:`n_range`, :attr:`layout` and :attr:`p1_index` from its names."""
+        super().__init_subclass__(**kwargs)
+        names, tail = cls.coefficient_names, cls.after_radial
+        if names:
+            cls.n_range = (len(names), len(names))
+            cls.layout = f"{len(names)} coefficients ({', '.join(names)})"
+            cls.p1_index = names.index("p1")
+        elif tail:
+            cls.n_range = (1 + len(tail), MAX_RADIAL_TERMS + len(tail))
+            cls.layout = (
+                f"(k1, …, kn, {', '.join(tail)}) with 1 <= n <= {MAX_RADIAL_TERMS} radial terms"
+            )
+            cls.p1_index = tail.index("p1") - len(tail)
 
     def __post_init__(self) -> None:
         coeffs = tuple(float(c) for c in self.coefficients)

@@ -36,8 +36,7 @@ class OpenCV5(LensModel):
     """OpenCV's 5-coefficient Brown–Conrady model (k1, k2, p1, p2, k3)."""
 
     name: ClassVar[str] = "opencv5"
-    n_range: ClassVar[tuple[int, int]] = (5, 5)
-    layout: ClassVar[str] = "5 coefficients (k1, k2, p1, p2, k3)"
+    coefficient_names: ClassVar[tuple[str, ...]] = ("k1", "k2", "p1", "p2", "k3")
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3 = self.coefficients
@@ -52,8 +51,7 @@ class OpenCV8(LensModel):
     """OpenCV's 8-coefficient rational model (k1, k2, p1, p2, k3, k4, k5, k6)."""
 
     name: ClassVar[str] = "opencv8"
-    n_range: ClassVar[tuple[int, int]] = (8, 8)
-    layout: ClassVar[str] = "8 coefficients (k1, k2, p1, p2, k3, k4, k5, k6)"
+    coefficient_names: ClassVar[tuple[str, ...]] = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
     def _radial(self, r2: Array) -> tuple[Array, Array, Array]:
         k1, k2, _, _, k3, k4, k5, k6 = self.coefficients
@@ -78,9 +76,7 @@ class RadialOdd(LensModel):
     """
 
     name: ClassVar[str] = "radial-odd"
-    n_range: ClassVar[tuple[int, int]] = (3, 12)
-    layout: ClassVar[str] = "(k1, …, kn, p1, p2) with 1 <= n <= 10 radial terms"
-    p1_index: ClassVar[int] = -2
+    after_radial: ClassVar[tuple[str, ...]] = ("p1", "p2")
 
     @property
     def n_radial(self) -> int:
@@ -132,9 +128,7 @@ class RadialOddCentred(LensModel):
     """
 
     name: ClassVar[str] = "radial-odd-centred"
-    n_range: ClassVar[tuple[int, int]] = (5, 14)
-    layout: ClassVar[str] = "(k1, …, kn, p1, p2, c_x, c_y) with 1 <= n <= 10 radial terms"
-    p1_index: ClassVar[int] = -4
+    after_radial: ClassVar[tuple[str, ...]] = ("p1", "p2", "c_x", "c_y")
 
     @cached_property
     def inner(self) -> RadialOdd:
@@ -212,7 +206,7 @@ def make_lens(name: str, coefficients: Any | None = None, *, n_radial: int = 6) 
         raise InputError(f"unknown lens model '{name}'; choose one of {sorted(LENS_MODELS)}")
     cls = LENS_MODELS[name]
     if coefficients is None:
-        n = {"opencv5": 5, "opencv8": 8}.get(name, n_radial + (4 if "centred" in name else 2))
+        n = len(cls.coefficient_names) or n_radial + len(cls.after_radial)
         coefficients = (0.0,) * n
     return cls(tuple(float(c) for c in np.ravel(np.asarray(coefficients, dtype=float))))
 
