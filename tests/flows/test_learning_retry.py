@@ -102,3 +102,17 @@ def test_a_face_outside_the_gate_is_measured_about_the_known_offset(
     # the hint only centres the gate: the faces measure the offset themselves (9.97 px, the
     # same with a hint of 13 or 16 px)
     assert len(c) >= 3 and abs(float(np.median(c)) - 9.97) < 0.1
+
+
+def test_the_flow_marks_a_capture_whose_wide_faces_all_missed_the_gate(
+    offset_set: tuple[Path, Path],
+) -> None:
+    """The retry's test on the real blocks: the wide found the faces, none was measured (a
+    result without faces is falsy: the count must not come from its truth value)."""
+    folder, cal_path = offset_set
+    cs = load_capture_set(folder)
+    r = learning.learn_face_capture(FlowConfig(), cs, cs.captures()[0],
+                                    load_calibration(cal_path), CachedBackend(default_backend()))
+    assert r.gate == "faces" and r.stages["landmarks"]["wide_faces"] >= 3
+    assert learning._gated_faces(r)
+

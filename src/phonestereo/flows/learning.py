@@ -225,7 +225,7 @@ def _learn(
         d_offset_px=d_offset_px,
     )
     stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s,
-                           "wide_faces": res.disparity.n_wide if res.disparity else 0}
+                           "wide_faces": 0 if res.disparity is None else res.disparity.n_wide}
     obs = res.observations
     if not obs:
         return CaptureLearning(entry.id, (), "faces", res.reason, stages, tuple(gates),
