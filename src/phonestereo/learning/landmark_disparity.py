@@ -317,10 +317,11 @@ def landmark_disparity(
     # a pair's landmark disparity (rows ± |e| + 2), a lone face's whole gate (rows ± max_e)
     reach = [FaceReach(pw[i], d_lm[i, j] - 5.0, d_lm[i, j] + 5.0, abs(e_lm[i, j]) + 3.0)
              for i, j in pairs]
+    # a lone face's gate: d_expected (less the known offset) ± the match_faces tolerance
+    tol = d_tol_px + d_tol_rel * np.abs(d_exp)
+    gates = np.column_stack([d_exp - d_offset_px - tol, d_exp - d_offset_px + tol])
     for i in lone:
-        tol = d_tol_px + d_tol_rel * abs(float(d_exp[i]))
-        d_gate = d_exp[i] - d_offset_px
-        reach.append(FaceReach(pw[i], d_gate - tol - 5.0, d_gate + tol + 5.0, max_e_px + 3.0))
+        reach.append(FaceReach(pw[i], gates[i, 0] - 5.0, gates[i, 1] + 5.0, max_e_px + 3.0))
     img = prepare(rect, image_wide, image_tele, reach) if pairs or lone else None
     out: list[FaceDisparity] = []
     unmatched: list[tuple[int, str]] = []
@@ -333,8 +334,8 @@ def landmark_disparity(
             unmatched.append((i, "no IPD depth"))
             continue
         assert img is not None
-        start, why = search_start(rect, img.left, img.right, pw[i], float(d_exp[i]),
-                                  d_tol_px, d_tol_rel, max_e_px, offset_px=d_offset_px)
+        start, why = search_start(rect, img.left, img.right, pw[i],
+                                  (float(gates[i, 0]), float(gates[i, 1])), max_e_px)
         if start is None:
             unmatched.append((i, tele_why + why))
         else:

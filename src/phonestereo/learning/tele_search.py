@@ -25,25 +25,20 @@ def search_start(
     left: F32,
     right: F32,
     pupils: F64,
-    d_expected: float,
-    d_tol_px: float,
-    d_tol_rel: float,
+    gate: tuple[float, float],
     max_e_px: float,
     min_score: float = 0.6,
-    offset_px: float = 0.0,
 ) -> tuple[tuple[float, float] | None, str]:
     """The landmark (d, e) of a wide face without a tele partner, searched from its rectified
     pupils (2, 2) in the rectified pair ``left`` (wide), ``right`` (tele) (float32): one window
-    per eye, NCC over the expected-disparity gate of
-    :func:`~phonestereo.learning.landmark_disparity.match_faces` (centred on
-    ``d_expected − offset_px``: the calibration's known disparity offset); both eyes must be in
-    the tele's image and agree within 2 px.
+    per eye, NCC over the disparities ``gate`` (lo, hi) px — the expected-disparity gate of
+    :func:`~phonestereo.learning.landmark_disparity.match_faces` — and rows within
+    ``max_e_px``; both eyes must be in the tele's image and agree within 2 px.
 
     Returns ((d, e), "") or (None, the reason).
     """
-    tol = d_tol_px + d_tol_rel * abs(d_expected)
-    d_expected = d_expected - offset_px
-    guess = pupils - [d_expected, 0.0]
+    lo, hi = gate
+    guess = pupils - [0.5 * (lo + hi), 0.0]
     raw = rect.unrectify_tele(guess)
     w, h = rect.rig.tele.size
     if not (np.isfinite(raw).all() and ((raw >= 0) & (raw <= [w - 1, h - 1])).all()):
@@ -55,15 +50,15 @@ def search_start(
     if not ((xy >= r + 2) & (xy < [ww - r - 2, hh - r - 2])).all():
         return None, "an eye is at the rectified image's edge"
     s = ncc_search(
-        left, right, xy, radius=r, min_d=int(np.floor(d_expected - tol)),
-        max_d=int(np.ceil(d_expected + tol)), row_tolerance=int(np.ceil(max_e_px)),
+        left, right, xy, radius=r, min_d=int(np.floor(lo)), max_d=int(np.ceil(hi)),
+        row_tolerance=int(np.ceil(max_e_px)),
         lr_min_score=np.inf,
     )
     ok = s.searched & ~s.at_edge & np.isfinite(s.d0) & (s.score >= min_score)
     if not ok.all() and (s.at_edge & (s.score >= min_score)).any():
         return None, (
             "no tele face landmarks and the eyes correlate best at the end of the disparities "
-            f"the IPD allows ({d_expected - tol:.0f} to {d_expected + tol:.0f} px): the "
+            f"the IPD allows ({lo:.0f} to {hi:.0f} px): the "
             "calibration's disparity is off by more than that, or the IPD is far from assumed"
         )
     if not ok.all():
