@@ -10,9 +10,12 @@ import pytest
 
 from phonestereo.evaluation.bench import apply_all
 from phonestereo.flows.config import FlowConfig
-from phonestereo.io import load_capture_set
+from phonestereo.flows.roi_config import RoiConfig, reaching
+from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
+from phonestereo.io import load_calibration, load_capture_set, read_gray
 from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, load_ground_truth
 from phonestereo.sim.module import load_module
+from phonestereo.sim.random_module import random_module
 from phonestereo.sim.scenarios import VerificationConfig, plan_scenario
 from phonestereo.sim.writer import write_capture_set
 
@@ -33,3 +36,27 @@ def test_periscope_x5_roi_is_measured(tmp_path) -> None:
         assert r.ok, r.reason
         z = gt.capture(r.capture_id).roi_depth_m
         assert abs(r.depth_uncorrected_m / z - 1) < 0.08
+
+
+def test_a_far_chart_of_a_module_whose_calibration_reads_low_is_found_below_minus_2_px(
+    tmp_path,
+) -> None:
+    """random-3004 (×3.94, 9.5 mm baseline, drawn as the acceptance seeds are; session 18's
+    first held-out scan): its factory calibration reads disparities ~7 px low, so a chart at
+    4 m (true 4.2 px) reads −2.8 px. The search stopped at −2 px and gated it "beyond infinity";
+    the application now searches to −⌈c⌉ − 1 for a learned correction c (+7.5 px there)."""
+    plan = plan_scenario("verification", random_module(3004), 3004,
+                         config=VerificationConfig(distances_m=(4.0,), attempts=1))
+    write_capture_set(tmp_path, plan)
+    cs = load_capture_set(tmp_path)
+    cal = load_calibration(cs.calibration_path())
+    ref = reference_rectification(cal.rig)
+    entry = cs.captures()[0]
+    wide, tele = (read_gray(p) for p in cs.image_paths(entry.id))
+    z = load_ground_truth(tmp_path / GROUND_TRUTH_NAME).capture(entry.id).roi_depth_m
+    d_true = ref.f_px * abs(ref.baseline_m) / z
+    gated = measure_roi(cal.rig, wide, tele, entry.roi, RoiConfig(), ref)
+    assert not gated.ok and "beyond infinity" in gated.reason
+    m = measure_roi(cal.rig, wide, tele, entry.roi, reaching(RoiConfig(), 7.5), ref)
+    # measured −2.78 px against the truth's 4.20 px: the calibration's offset there, 7.0 px
+    assert m.ok and m.majority_px < -2.0 and 6.0 < d_true - m.majority_px < 8.0, m.majority_px
