@@ -22,7 +22,11 @@ from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
 from phonestereo.learning.heating_term import HeatingTerm
 from phonestereo.learning.lookup import STRATEGIES, DictionaryLookup
-from phonestereo.learning.observation import Correction, as_observation_array
+from phonestereo.learning.observation import (
+    Correction,
+    as_observation_array,
+    typical_correction_px,
+)
 
 #: Lookup strategies: the smooth field (default, beyond the thesis) and Figure 3-31's.
 LOOKUPS = ("field", *STRATEGIES)
@@ -327,13 +331,10 @@ class Corrector:
         return int(np.sum(self.observations["orientation"] == self.bucket(orientation)))
 
     def typical_px(self, orientation: str) -> float:
-        """The median learned correction d_expected − d_measured in the capture's bucket, px
-        (0 without observations): a far point's measured disparity is about its negative."""
+        """The bucket's :func:`~phonestereo.learning.observation.typical_correction_px`."""
         ob = self.observations
-        ob = ob[ob["orientation"] == self.bucket(orientation)] if ob.size else ob
-        c = ob["d_expected_px"] - ob["d_measured_px"] if ob.size else np.zeros(0)
-        c = c[np.isfinite(c)]
-        return float(np.median(c)) if c.size else 0.0
+        return typical_correction_px(ob[ob["orientation"] == self.bucket(orientation)]
+                                     if ob.size else ob)
 
     def correct(
         self, query: Any, orientation: str, temperature_c: float | None = None,

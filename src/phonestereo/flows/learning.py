@@ -23,7 +23,7 @@ plane) or real faces of unknown IPD (the population prior, each head on its own)
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
@@ -46,7 +46,7 @@ from phonestereo.io.fingerprint import capture_set_fingerprint
 from phonestereo.learning.chart_pitch import CHART_PITCH_M
 from phonestereo.learning.ipd import IpdPrior
 from phonestereo.learning.learn import learn_capture
-from phonestereo.learning.observation import Observation
+from phonestereo.learning.observation import Observation, typical_correction_px
 from phonestereo.learning.provenance import StoreContext
 from phonestereo.learning.store import FixStore
 from phonestereo.rectification import Rectification
@@ -298,13 +298,6 @@ def _gated_faces(r: CaptureLearning) -> bool:
     return r.gate == "faces" and r.stages.get("landmarks", {}).get("wide_faces", 0) > 0
 
 
-def typical_correction(captures: Sequence[CaptureLearning]) -> float:
-    """The median correction d_expected − d_measured over the learned captures'
-    observations, px (0 without any)."""
-    c = [o.d_expected_px - o.d_measured_px for r in captures if r.ok for o in r.observations]
-    return float(np.median(c)) if c else 0.0
-
-
 def run(
     config: FlowConfig,
     cs: CaptureSet,
@@ -360,6 +353,7 @@ def run(
     det = backend if backend is not None else default_backend()
     corr = stack_corrections(config, cs, faces, calibration)
     ref = reference_rectification(calibration.rig, config.mode)
+
     def learn(entry: CaptureEntry, offset: float = 0.0) -> CaptureLearning:
         r = learn_face_capture(config, cs, entry, calibration, det, focus=corr.get(entry.id),
                                ipd=mode, reference=ref, d_offset_px=offset)
@@ -376,7 +370,7 @@ def run(
             progress(k + 1, len(faces), entry.id)
     # Faces are gated about the disparity their IPD predicts; a calibration off by more than
     # the gate (random-3004: +7.5 px) loses its far faces. The captures learned say by how much.
-    offset = typical_correction(out)
+    offset = typical_correction_px([o for r in out for o in r.observations])
     if abs(offset) >= RETRY_OFFSET_PX:
         out = [learn(e, offset) if _gated_faces(r) else r for e, r in zip(faces, out, strict=True)]
     n_obs = sum(len(r.observations) for r in out if r.ok)

@@ -215,6 +215,16 @@ def corrections_px(obs: np.ndarray) -> np.ndarray:
     return np.asarray(obs["d_expected_px"] - obs["d_measured_px"], dtype=np.float64)
 
 
+def typical_correction_px(obs: Any) -> float:
+    """The median finite ``d_expected − d_measured`` of observations (an array or a sequence of
+    :class:`Observation`), px; 0 without any. A far point's measured disparity is about its
+    negative (the flows widen their searches by it)."""
+    arr = as_observation_array(obs)
+    c = corrections_px(arr) if arr.size else np.zeros(0)
+    c = c[np.isfinite(c)]
+    return float(np.median(c)) if c.size else 0.0
+
+
 def _json_value(v: Any) -> Any:
     if isinstance(v, np.floating | float):
         return None if math.isnan(v) else float(v)
