@@ -9,6 +9,7 @@ from dataclasses import replace
 import pytest
 
 from phonestereo.evaluation.bench import apply_all
+from phonestereo.evaluation.summary import score_capture_set
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.roi_config import RoiConfig, reaching
 from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
@@ -60,3 +61,7 @@ def test_a_far_chart_of_a_module_whose_calibration_reads_low_is_found_below_minu
     m = measure_roi(cal.rig, wide, tele, entry.roi, reaching(RoiConfig(), 7.5), ref)
     # measured −2.78 px against the truth's 4.20 px: the calibration's offset there, 7.0 px
     assert m.ok and m.majority_px < -2.0 and 6.0 < d_true - m.majority_px < 8.0, m.majority_px
+    # the naive Z = f·B/d puts the chart beyond infinity: an unbounded error, not NaN (the
+    # demo's naive column read "nan" for the whole set)
+    naive = score_capture_set(tmp_path)["stages"]["naive"]
+    assert naive["median_rel_err"] == float("inf") and naive["n_unbounded"] == 1

@@ -138,10 +138,13 @@ def print_bench(res: dict[str, Any], title: str) -> None:
     for _, label in stages:
         table.add_column(f"{label}\nmedian/p90 %", justify="right")
 
+    def pc(v: float | None) -> str:  # ∞: a naive depth at or beyond infinity (unbounded)
+        return "∞" if v == float("inf") else "–" if v is None or v != v else f"{100 * v:.2f}"
+
     def cell(s: dict[str, Any] | None) -> str:
         if not s or s.get("median_rel_err") is None:
             return "–"
-        return f"{100 * s['median_rel_err']:.2f} / {100 * s['p90_rel_err']:.2f}"
+        return f"{pc(s['median_rel_err'])} / {pc(s['p90_rel_err'])}"
 
     for row in res["per_distance"]:
         table.add_row(f"{row['distance_m']:.1f} m", *(cell(row.get(k)) for k, _ in stages))

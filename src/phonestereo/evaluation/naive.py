@@ -106,7 +106,8 @@ def naive_relative_errors(
     Returns
     -------
     ndarray, shape (M,)
-        Relative depth errors of the M keypoints visible in both images (all objects).
+        Relative depth errors of the M keypoints visible in both images (all objects); inf
+        where the naive disparity is ≤ 0 (the point at or beyond infinity).
     """
     errs = []
     for obj in capture.objects:
@@ -114,6 +115,12 @@ def naive_relative_errors(
             continue
         kt = obj.keypoints[keypoints].arrays()
         ok = np.isfinite(kt.wide_px).all(axis=1) & np.isfinite(kt.tele_px).all(axis=1)
-        z = naive_depth(kt.wide_px[ok], kt.tele_px[ok], calibration)
-        errs.append(np.abs(z - kt.depth_m[ok]) / kt.depth_m[ok])
+        q_wide, q_tele = kt.wide_px[ok], kt.tele_px[ok]
+        z = naive_depth(q_wide, q_tele, calibration)
+        err = np.abs(z - kt.depth_m[ok]) / kt.depth_m[ok]
+        # a naive disparity ≤ 0 puts the point at or beyond infinity: an unbounded error (a
+        # calibration that reads disparities low, random-3004); a pixel that cannot be
+        # undistorted has none and is left out
+        beyond = np.isnan(z) & (naive_disparity(q_wide, q_tele, calibration) <= 0)
+        errs.append(np.where(beyond, np.inf, err)[np.isfinite(err) | beyond])
     return np.concatenate(errs) if errs else np.zeros(0)

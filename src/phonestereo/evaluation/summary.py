@@ -19,13 +19,29 @@ from phonestereo.sim.ground_truth import load_ground_truth
 
 
 def _stats(errors: np.ndarray) -> dict[str, float]:
+    """Median and 90th percentile of relative errors (N,); an unbounded error (inf: a naive
+    depth at or beyond infinity) counts as the largest, and a quantile it weighs in is inf
+    (``n_unbounded`` says how many there were).
+
+    >>> _stats(np.array([0.1, 0.2, 0.3, np.inf]))
+    {'median_rel_err': 0.25, 'p90_rel_err': inf, 'n': 4, 'n_unbounded': 1}
+    """
     if errors.size == 0:
         return {"median_rel_err": float("nan"), "p90_rel_err": float("nan"), "n": 0}
-    return {
-        "median_rel_err": float(np.median(errors)),
-        "p90_rel_err": float(np.percentile(errors, 90)),
-        "n": int(errors.size),
-    }
+    finite = np.isfinite(errors)
+    if finite.all():
+        return {
+            "median_rel_err": float(np.median(errors)),
+            "p90_rel_err": float(np.percentile(errors, 90)),
+            "n": int(errors.size),
+        }
+    # NumPy's linear quantiles turn inf into NaN: a finite stand-in above every error, then
+    # any quantile above the largest finite error is one an unbounded error weighs in
+    top = float(errors[finite].max(initial=0.0))
+    q = np.percentile(np.where(finite, errors, 1e300), [50, 90])
+    q = np.where(q > top, np.inf, q)
+    return {"median_rel_err": float(q[0]), "p90_rel_err": float(q[1]), "n": int(errors.size),
+            "n_unbounded": int(np.sum(~finite))}
 
 
 def score_capture_set(folder: str | Path, kind: str = "verification") -> dict[str, Any]:
