@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from phonestereo.flows.coarse import coarse_search, peak_contrast
-from phonestereo.flows.coarse_gate import coarse_peak
+from phonestereo.flows.coarse_gate import coarse_peak, coarse_verdict
 from phonestereo.flows.roi_config import RoiConfig, reaching
 
 BOX = (130, 50, 404, 500)
@@ -167,3 +167,25 @@ def test_a_far_point_beyond_minus_2_px_is_found_once_the_learned_correction_reac
     assert cfg.far_disparity_px == -9
     found = coarse_peak(left, right, [BOX], 64, cfg)
     assert found.reason == "" and abs(found.peak.d + 5.0) <= 1.0, (found.reason, found.peak)
+
+
+def test_the_first_peak_must_beat_every_near_alias_not_only_the_second() -> None:
+    """random-3014's chart at 3.2 m: the whole-box ZNCC peaked at 127 px (0.797), then 101
+    (0.769), 44 and 18 px (both 0.691, the truth 18 px); 127 beat 101 tile by tile (t = 5.0) and
+    the capture read 0.44 m ± 0.002 m. Here stripes of period 26 px, truly shifted by 20 px: the
+    peak staged at 20 + 2·26 px loses to the alias at 20 px, while the second, half a period
+    away, loses to it in every tile: the gate must test the third too."""
+    rng = np.random.default_rng(4)
+    xx = np.arange(700, dtype=np.float64)
+    row = 100 + 60 * np.sin(2 * np.pi * xx / 26.0)
+    noise = rng.normal(0, 2, (600, 700))
+    left = (np.tile(row, (600, 1)) + noise).astype(np.float32)
+    right = _tele(left, 20.0, 1.0, rng)
+    cp = coarse_search(left, right, BOX, -2, 120, rows=8)
+    assert cp.others  # the stripes' further aliases are kept
+    staged = replace(cp, d=72.0, e=0.0, second=0.9 * cp.peak, d2=59.0, e2=0.0,
+                     others=((20.0, 0.0, 0.95 * cp.peak),))
+    assert coarse_verdict(left, right, BOX, staged, replace(RoiConfig(), alias_ratio=1.0))[0] == ""
+    why, pc = coarse_verdict(left, right, BOX, staged, RoiConfig())
+    # (here the truth even wins its tiles: t = −171 for the staged peak against it)
+    assert "ambiguous" in why and "20 px" in why and pc is not None and pc.t < 2.0, why

@@ -41,6 +41,10 @@ class CoarsePeak:
     #: The highest peak lies at an end of the searched range: the correlation may still rise beyond
     #: it, so its disparity is not located.
     at_end: bool = False
+    #: ((d, e, ZNCC), ...). The candidates after the second, highest first (at most 8): a periodic
+    #: texture's aliases, of which the truth may be any (random-3014: 127 px first, 101 second,
+    #: the truth 18 px fourth).
+    others: tuple[tuple[float, float, float], ...] = ()
 
 
 _NO_PEAK = CoarsePeak(float("nan"), float("nan"), float("nan"))
@@ -102,9 +106,11 @@ def coarse_search(
     at_end = len(col) > 1 and j in (0, len(col) - 1)
     if not idx.size:
         return CoarsePeak(d, peak, e, at_end=at_end)
-    k = int(idx[np.argmax(col[idx])])
+    order = idx[np.argsort(-col[idx], kind="stable")]
+    k = int(order[0])
     d2, e2 = d_e(k)
-    return CoarsePeak(d, peak, e, float(col[k]), d2, e2, at_end)
+    others = tuple((*d_e(int(i)), float(col[i])) for i in order[1:9])
+    return CoarsePeak(d, peak, e, float(col[k]), d2, e2, at_end, others)
 
 
 def coarse_disparity(

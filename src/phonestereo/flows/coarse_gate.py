@@ -65,16 +65,22 @@ def coarse_verdict(
     if not np.isfinite(cp.d2):
         return "", None
     # A periodic texture's alias peak is near the true one over the whole box by chance: the
-    # first must beat it tile by tile (coarse.peak_contrast), not only in the sum.
-    pc = peak_contrast(lw, rt, cbox, (cp.d, cp.e), (cp.d2, cp.e2), reuse=maps)
-    if not pc.t >= cfg.min_peak_t:
-        return (
-            f"ambiguous disparity: the correlation peaks at {cp.d:.1f} px and {cp.d2:.0f} px "
-            f"(ZNCC {cp.peak:.3f}, {cp.second:.3f}) and the first wins only by chance over the "
-            f"box's tiles (t = {pc.t:.1f} < {cfg.min_peak_t}) — a repetitive texture; enlarge "
-            "the ROI over a distinct feature or aim at a distinct object"
-        ), pc
-    return "", pc
+    # first must beat it tile by tile (coarse.peak_contrast), not only in the sum — and so every
+    # other alias within alias_ratio of it, any of which may be the truth.
+    rivals = [(cp.d2, cp.e2, cp.second)]
+    rivals += [o for o in cp.others if o[2] >= cfg.alias_ratio * cp.peak]
+    first: PeakContrast | None = None
+    for d2, e2, z2 in rivals:
+        pc = peak_contrast(lw, rt, cbox, (cp.d, cp.e), (d2, e2), reuse=maps)
+        first = first or pc
+        if not pc.t >= cfg.min_peak_t:
+            return (
+                f"ambiguous disparity: the correlation peaks at {cp.d:.1f} px and {d2:.0f} px "
+                f"(ZNCC {cp.peak:.3f}, {z2:.3f}) and the first wins only by chance over the "
+                f"box's tiles (t = {pc.t:.1f} < {cfg.min_peak_t}) — a repetitive texture; "
+                "enlarge the ROI over a distinct feature or aim at a distinct object"
+            ), pc
+    return "", first
 
 
 @dataclass(frozen=True)

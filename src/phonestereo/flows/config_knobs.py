@@ -98,6 +98,13 @@ KNOBS: dict[str, dict[str, tuple[str, str, str]]] = {
             "2.40 m); true peaks: folded-x3 demo 3.8-5.5, periscope-x5 demo 2.3-2.8 (a threshold "
             "of 3 gated 4 of its 18 captures).",
         ),
+        "alias_ratio": (
+            "fraction",
+            "The first coarse peak must also beat, tile by tile, every further peak within this "
+            "fraction of its ZNCC.",
+            "0.85: random-3014's truth read 0.87 of an alias (t = −0.2 against it); the bench's "
+            "measured charts beat their aliases at t ≥ 2.2.",
+        ),
         "coarse_max_scale_drift_px": (
             "px",
             "When the W-T scale the coarse box's tiles show moves the box's edges by more than "
