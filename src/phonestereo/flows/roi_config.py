@@ -58,8 +58,8 @@ class RoiConfig:
     min_peak_t: float = 2.0
     #: The first coarse peak must also beat, tile by tile, every further peak within this fraction
     #: of its ZNCC (a periodic texture's aliases: random-3014's truth read 0.87 of an alias 109 px
-    #: away and t = −0.2 against it, while the bench's measured charts beat theirs at t ≥ 2.2);
-    #: 1 tests the second peak only.
+    #: away and t = −0.2 against it, while its measured charts beat theirs at t ≥ 2.2; on the 33
+    #: bench sets it gates 2 more of 594 charts); 1 tests the second peak only.
     alias_ratio: float = 0.85
     #: When the W-T scale the coarse box's tiles show moves its edges by more than this against its
     #: centre, the tele window is corrected for that scale before the coarse and fine steps (only
