@@ -14,7 +14,8 @@ from phonestereo.charts.export import M_PER_INCH, export_pdf, export_png
 from phonestereo.charts.faces import FaceChart
 from phonestereo.charts.verification import VerificationChart
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import json_option
+from phonestereo.cli.outputs import require_output_file
+from phonestereo.cli.widgets import flag, json_option
 from phonestereo.errors import InputError
 
 
@@ -47,12 +48,14 @@ def chart_command(
         typer.Option("--dpi", help="Raster resolution: the face chart in a PDF, or a PNG."),
     ] = 300.0,
     as_json: Annotated[bool, json_option("Print the sizes as JSON.")] = False,
+    force: Annotated[bool, flag("--force", "Overwrite an existing --out file.")] = False,
 ) -> None:
     """Write a printable chart at physical size (PDF: chart + scale-bar strip; print at 100 %).
 
     Example: phonestereo chart verification --out verification.pdf --square-mm 25
     """
     try:
+        require_output_file(out, force=force, suffixes=(".pdf", ".png"))
         chart: Chart
         if kind is ChartKind.verification:
             chart = VerificationChart(square_m=(square_mm or 25.0) / 1000.0)

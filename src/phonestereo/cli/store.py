@@ -14,7 +14,8 @@ from typing import Annotated
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, json_option
+from phonestereo.cli.outputs import require_output_file
+from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
 from phonestereo.learning.store_open import open_for_reading
@@ -109,9 +110,11 @@ def export(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output .csv or .json.", show_default=False)
     ],
+    force: Annotated[bool, flag("--force", "Overwrite an existing --out file.")] = False,
 ) -> None:
     """Write every learned observation to CSV or JSON."""
     try:
+        require_output_file(out, force=force, suffixes=(".csv", ".json"))
         with _open(file) as st:
             n = st.export(out)
     except (StoreError, InputError) as exc:
