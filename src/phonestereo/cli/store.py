@@ -18,7 +18,7 @@ from phonestereo.cli.outputs import require_output_file
 from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
-from phonestereo.learning.store_open import open_for_reading
+from phonestereo.learning.store_open import open_for_reading, refuse_empty
 
 store_app = typer.Typer(
     help="The fix store of learned disparity corrections: stats, export, vacuum.",
@@ -33,6 +33,7 @@ def _open(path: Path, write: bool = False) -> FixStore:
     """Open an existing store (never create one from an inspection command)."""
     if not path.exists():
         raise StoreError(f"the fix store '{path}' does not exist; check the path")
+    refuse_empty(path)
     return FixStore(path) if write else open_for_reading(path)
 
 
