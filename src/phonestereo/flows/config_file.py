@@ -125,9 +125,10 @@ def load_flow_config(path: str | os.PathLike[str] | None) -> FlowConfig:
         raise InputError(f"--config {p} is a folder; give a JSON file (phonestereo config show)")
     try:
         text = p.read_text(encoding="utf-8")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
         raise InputError(
-            f"cannot read --config {p} ({exc.strerror or exc}); write one with "
+            f"cannot read --config {p} ({why or exc}); write one with "
             "`phonestereo config show > flow.json` and edit it"
         ) from None
     try:

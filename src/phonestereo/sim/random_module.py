@@ -179,8 +179,8 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
     if path is not None:
         p = Path(path)
         try:
-            user = json.loads(p.read_text())
-        except OSError as exc:
+            user = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"cannot read --ranges file {p}: {exc}") from None
         except json.JSONDecodeError as exc:
             raise InputError(f"--ranges file {p} is not valid JSON: {exc.msg} at line "
