@@ -21,7 +21,7 @@ $(STAMP): requirements.lock pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/phonestereo demo
+	$(BIN)/phonestereo demo --force  # replaces the previous demo_out set
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

@@ -8,21 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from phonestereo.cli import app
+from _support.cli import run as _run
+from _support.cli import tree as _tree
 from phonestereo.errors import InputError
 from phonestereo.io import write_image
-
-
-def _run(*args: str) -> tuple[int, str]:
-    res = CliRunner().invoke(app, list(args))
-    # Rich boxes and wraps long messages: compare on the words
-    return res.exit_code, " ".join(res.output.replace("│", " ").split())
-
-
-def _tree(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
 def _simulate(out: Path, scenario: str, *extra: str) -> tuple[int, str]:

@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from phonestereo.cli.app import app
+from phonestereo.cli.outputs import require_writable
 from phonestereo.cli.widgets import json_option
 from phonestereo.errors import InputError
 from phonestereo.evaluation.analyses import ANALYSES, run_analysis
@@ -58,6 +59,7 @@ def analyze_command(
         TimeRemainingColumn(), console=console, transient=True,
     )
     try:
+        require_writable(out)
         with bar:
             task = bar.add_task(f"{name}: measuring captures", total=None)
 

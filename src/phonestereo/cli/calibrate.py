@@ -14,7 +14,8 @@ from rich.progress import Progress
 from phonestereo.calibration.from_images import ImageReport, calibrate_from_images, parse_board
 from phonestereo.calibration.solve import CalibrationOptions, intrinsic_extrinsic_covariance
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import figure_table, json_option
+from phonestereo.cli.outputs import require_output_file, require_output_folder
+from phonestereo.cli.widgets import figure_table, flag, json_option
 from phonestereo.errors import InputError
 from phonestereo.geometry import LENS_MODELS, Rig
 from phonestereo.io import Calibration, save_calibration
@@ -55,6 +56,9 @@ def calibrate(
             "(inliers / outliers) and residual vs radius (residuals_<camera>.png)."
         ),
     ] = None,
+    force: Annotated[
+        bool, flag("--force", "Overwrite an existing --out file (and --plots figures).")
+    ] = False,
 ) -> None:
     """Calibrate one camera, or the wide + tele pair, from images of a plain chessboard.
 
@@ -69,6 +73,11 @@ def calibrate(
     if model not in FIT_MODELS:
         raise typer.BadParameter(f"unknown model '{model}'; choose one of {sorted(FIT_MODELS)}")
     try:
+        require_output_file(out, force=force, suffixes=(".json",))
+        if plots is not None:
+            stems = ("wide", "tele") if tele else ("camera",)
+            pngs = [f"residuals_{stem}.png" for stem in stems]
+            require_output_folder(plots, pngs, force=force, flag="--plots")
         pattern = parse_board(board)
         with Progress(console=console, transient=True, disable=as_json) as bar:
             task = bar.add_task("detecting boards", total=None)

@@ -23,7 +23,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from phonestereo.cli.app import app
 from phonestereo.cli.depth import clean, print_bench
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import json_option
+from phonestereo.cli.outputs import prepare_capture_set_folder
+from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError
 from phonestereo.evaluation.bench import run_bench
 from phonestereo.flows.config_file import load_flow_config
@@ -51,7 +52,9 @@ def demo(
         bool, typer.Option(help="The complete bench (5 attempts per stack) and the ablations.")
     ] = False,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    workers: Annotated[int, typer.Option(help="Rendering processes.")] = 0,
+    workers: Annotated[
+        int, typer.Option(help="Rendering processes (0: one per core, up to 2).", min=0)
+    ] = 0,
     config: CONFIG_OPTION = None,
     as_json: Annotated[bool, json_option("Print the scores as JSON.")] = False,
     roi_jitter: Annotated[
@@ -63,20 +66,24 @@ def demo(
             max=0.5,
         ),
     ] = 0.0,
+    force: Annotated[
+        bool, flag("--force", "Replace an earlier demo's capture set in --out (files go first).")
+    ] = False,
 ) -> None:
     """Simulate the thesis bench, learn, apply and score every stage against ground truth.
 
     Writes the capture set (images, manifest, factory calibration, ground truth) and
     report.html (error vs distance per stage, rendered captures with their ROIs, the learned
-    correction over the sensor; with --full the ablation table) into --out.
+    correction over the sensor; with --full the ablation table) into --out. --out must be new
+    or empty; an earlier demo's capture set there is replaced only with --force.
     """
     t0 = time.perf_counter()
     try:
         cfg = load_flow_config(config)
+        spec = load_module(module)
+        prepare_capture_set_folder(out, force=force)
     except InputError as exc:
-        Console(stderr=True, soft_wrap=True).print(f"[red]error:[/red] {exc}")
-        raise typer.Exit(2) from exc
-    spec = load_module(module)
+        raise error_exit(exc) from exc
     bench = BenchConfig() if full else QUICK
     if roi_jitter > 0:
         bench = replace(

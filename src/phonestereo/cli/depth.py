@@ -14,7 +14,8 @@ from rich.table import Table
 
 from phonestereo.cli.app import app
 from phonestereo.cli.flow_options import CONFIG_OPTION
-from phonestereo.cli.widgets import error_exit, json_option
+from phonestereo.cli.outputs import require_output_file
+from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError, PhysicsError, StoreError
 from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
@@ -183,6 +184,7 @@ def evaluate(
     ] = None,
     config: CONFIG_OPTION = None,
     as_json: Annotated[bool, json_option("Print the scores as JSON.")] = False,
+    force: Annotated[bool, flag("--force", "Overwrite an existing --report file.")] = False,
 ) -> None:
     """Score every stage of the flows against ground truth (the thesis bench, docs/architecture.md).
 
@@ -192,6 +194,8 @@ def evaluate(
     """
     console = Console(stderr=True, soft_wrap=True)
     try:
+        if report is not None:
+            require_output_file(report, force=force, flag="--report", suffixes=(".html",))
         cfg = load_flow_config(config)
         with _bar("evaluate", console, as_json) as bar:
             task = bar.add_task("evaluate", total=None)

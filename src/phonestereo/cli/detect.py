@@ -12,7 +12,8 @@ import numpy as np
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, json_option, overlay_option
+from phonestereo.cli.outputs import IMAGE_OUT, require_output_file
+from phonestereo.cli.widgets import error_exit, flag, json_option, overlay_option
 from phonestereo.errors import InputError
 from phonestereo.features.verification import ChartDetection, detect_verification_chart
 from phonestereo.io import read_gray, write_image
@@ -105,6 +106,7 @@ def detect_chart(
             "towards +y (e.g. 90 for a camera rolled by −90°); ±45° around it are accepted.",
         ),
     ] = 0.0,
+    force: Annotated[bool, flag("--force", "Overwrite an existing --overlay file.")] = False,
 ) -> None:
     """Find the verification chart (chessboard + four circle pairs) and label its corners.
 
@@ -121,6 +123,8 @@ def detect_chart(
             param_hint="--rotation-hint",
         )
     try:
+        if overlay is not None:
+            require_output_file(overlay, force=force, flag="--overlay", suffixes=IMAGE_OUT)
         img = read_gray(image)
         det = detect_verification_chart(
             img, roi=_parse_roi(roi), rotation_hint_deg=rotation_hint_deg

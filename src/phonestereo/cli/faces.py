@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from phonestereo.cli.app import app
+from phonestereo.cli.outputs import IMAGE_OUT, require_output_file
 from phonestereo.cli.widgets import error_exit, flag, json_option, overlay_option
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import MediaPipeBackend, read_color, read_openface_csv
@@ -57,6 +58,7 @@ def faces(
             "Also search the image turned by 90°, 180°, 270° (4× time).",
         ),
     ] = False,
+    force: Annotated[bool, flag("--force", "Overwrite an existing --overlay file.")] = False,
 ) -> None:
     """List the faces of IMAGE with pupil positions, pixel IPD and head yaw, and draw them.
 
@@ -67,6 +69,8 @@ def faces(
     Example: phonestereo faces portrait.jpg --json --overlay portrait_faces.png
     """
     try:
+        if overlay is not None:
+            require_output_file(overlay, force=force, flag="--overlay", suffixes=IMAGE_OUT)
         img = read_color(image)
         if openface_csv is not None:
             frames = read_openface_csv(openface_csv, (img.shape[1], img.shape[0]))

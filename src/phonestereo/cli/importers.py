@@ -17,6 +17,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from phonestereo.cli.app import app
+from phonestereo.cli.outputs import require_writable
 from phonestereo.cli.widgets import JSON_SUMMARY, error_exit
 from phonestereo.errors import InputError
 
@@ -67,6 +68,7 @@ def _dump_command(platform: str, doc: str) -> None:
         as_json: JSON_SUMMARY = False,
     ) -> None:
         module = importlib.import_module(f"phonestereo.io.importers.{platform}")
+        _run(require_writable, out)
         _report(_run(getattr(module, f"import_{platform}"), dump, out), as_json)
 
     command.__name__ = f"import_{platform}_command"
@@ -145,6 +147,7 @@ def import_exif_command(
         )
     if focus_mode not in ("manual", "auto"):
         raise typer.BadParameter("must be manual or auto", param_hint="--focus-mode")
+    _run(require_writable, out)
     result = _run(import_exif, wide_glob, tele_glob, calibration, out, kind=kind,
                   focus_mode=focus_mode, time_offset_s=time_offset_s, orientation=orientation,
                   max_gap_s=max_gap_s)

@@ -11,7 +11,8 @@ from typing import Annotated, Any
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, json_option
+from phonestereo.cli.outputs import require_output_file
+from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError
 from phonestereo.geometry.transform import SNAP_TOLERANCE, orthonormality_error
 from phonestereo.io import (
@@ -130,6 +131,7 @@ def convert_calibration(
     as_json: Annotated[
         bool, json_option("Print what was written and what was changed as JSON.")
     ] = False,
+    force: Annotated[bool, flag("--force", "Overwrite an existing DST file.")] = False,
 ) -> None:
     """Convert a calibration between phonestereo JSON and OpenCV FileStorage YAML.
 
@@ -145,6 +147,7 @@ def convert_calibration(
                 f"'{dst.suffix}': name it .json (phonestereo calibration) or .yml/.yaml/.xml "
                 "(OpenCV FileStorage)"
             )
+        require_output_file(dst, force=force, flag="DST")
         if src.suffix.lower() in _YAML:
             imported = read_opencv_yaml(
                 src,

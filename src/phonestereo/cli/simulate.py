@@ -19,7 +19,7 @@ from rich.console import Console
 from rich.table import Table
 
 from phonestereo.cli.app import app
-from phonestereo.cli.outputs import prepare_capture_set_folder
+from phonestereo.cli.outputs import prepare_capture_set_folder, require_output_file
 from phonestereo.cli.widgets import JSON_SUMMARY, error_exit, flag, json_option, progress_bar
 from phonestereo.errors import InputError
 from phonestereo.sim.module import EFFECT_NAMES, ModuleSpec, list_presets, load_module
@@ -220,6 +220,7 @@ def module_random(
         Path | None, typer.Option("--out", "-o", help="Write the module JSON here.")
     ] = None,
     as_json: Annotated[bool, json_option("Print the module JSON (default when no --out).")] = False,
+    force: Annotated[bool, flag("--force", "Overwrite an existing --out file.")] = False,
 ) -> None:
     """Draw a physically consistent random module from documented ranges.
 
@@ -233,6 +234,8 @@ def module_random(
     from phonestereo.sim.random_module import load_ranges, random_module
 
     try:
+        if out is not None:
+            require_output_file(out, force=force, suffixes=(".json",))
         spec = random_module(seed, load_ranges(ranges))
     except InputError as err:
         raise error_exit(err) from err

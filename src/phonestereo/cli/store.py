@@ -14,10 +14,11 @@ from typing import Annotated
 import typer
 
 from phonestereo.cli.app import app
-from phonestereo.cli.widgets import error_exit, json_option
+from phonestereo.cli.outputs import require_output_file
+from phonestereo.cli.widgets import error_exit, flag, json_option
 from phonestereo.errors import InputError, StoreError
 from phonestereo.learning.store import FixStore, StoreStats
-from phonestereo.learning.store_open import open_for_reading
+from phonestereo.learning.store_open import open_for_reading, refuse_empty
 
 store_app = typer.Typer(
     help="The fix store of learned disparity corrections: stats, export, vacuum.",
@@ -32,6 +33,7 @@ def _open(path: Path, write: bool = False) -> FixStore:
     """Open an existing store (never create one from an inspection command)."""
     if not path.exists():
         raise StoreError(f"the fix store '{path}' does not exist; check the path")
+    refuse_empty(path)
     return FixStore(path) if write else open_for_reading(path)
 
 
@@ -109,9 +111,11 @@ def export(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output .csv or .json.", show_default=False)
     ],
+    force: Annotated[bool, flag("--force", "Overwrite an existing --out file.")] = False,
 ) -> None:
     """Write every learned observation to CSV or JSON."""
     try:
+        require_output_file(out, force=force, suffixes=(".csv", ".json"))
         with _open(file) as st:
             n = st.export(out)
     except (StoreError, InputError) as exc:

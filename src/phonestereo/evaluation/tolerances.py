@@ -185,7 +185,13 @@ def validate_tolerances(tolerances: ToleranceSet, spec: ModuleSpec) -> Tolerance
 
 
 def _read_text(path: Path) -> Any:
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(
+            f"cannot read tolerances file {path}: {exc}; pass a UTF-8 JSON (or YAML) file "
+            "to --tolerances"
+        ) from None
     if path.suffix.lower() in (".yaml", ".yml"):
         try:
             import yaml  # type: ignore[import-untyped]
@@ -213,6 +219,8 @@ def load_tolerances(path: str | Path, spec: ModuleSpec | None = None) -> Toleran
         Missing or malformed file, a bad distribution, or unknown parameters.
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"tolerances file {p} is a folder; pass --tolerances FILE.json")
     if not p.is_file():
         raise InputError(f"tolerances file {p} does not exist; pass --tolerances FILE.json")
     try:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import typing
 from functools import cache
@@ -95,6 +96,12 @@ def flow_config_from_dict(data: Any, source: str = "the flow config") -> FlowCon
     """
     if not isinstance(data, dict):
         raise InputError(f"{source} must be a JSON object of knobs; see `phonestereo config show`")
+    bad = _non_finite(data)
+    if bad is not None:
+        raise InputError(
+            f"{source}: knob {bad[0]} is {bad[1]}; every knob is a finite number "
+            "(`phonestereo config show` prints the defaults)"
+        )
     try:
         model = flow_model().model_validate(data)
     except pydantic.ValidationError as exc:
@@ -125,9 +132,10 @@ def load_flow_config(path: str | os.PathLike[str] | None) -> FlowConfig:
         raise InputError(f"--config {p} is a folder; give a JSON file (phonestereo config show)")
     try:
         text = p.read_text(encoding="utf-8")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
         raise InputError(
-            f"cannot read --config {p} ({exc.strerror or exc}); write one with "
+            f"cannot read --config {p} ({why or exc}); write one with "
             "`phonestereo config show > flow.json` and edit it"
         ) from None
     try:
@@ -135,6 +143,23 @@ def load_flow_config(path: str | os.PathLike[str] | None) -> FlowConfig:
     except ValueError as exc:
         raise InputError(f"--config {p} is not valid JSON ({exc})") from None
     return flow_config_from_dict(data, f"--config {p}")
+
+
+def _non_finite(data: Any, path: str = "") -> tuple[str, float] | None:
+    """The first knob (dotted path) of a parsed config whose value is NaN or ±Infinity.
+
+    >>> _non_finite({"warmup_s": 240, "roi": {"match": {"radius": float("inf")}}})
+    ('roi.match.radius', inf)
+    """
+    if isinstance(data, float) and not math.isfinite(data):
+        return path, data
+    items = data.items() if isinstance(data, dict) else enumerate(data) if isinstance(
+        data, list) else ()
+    for key, value in items:
+        found = _non_finite(value, f"{path}.{key}" if path else str(key))
+        if found is not None:
+            return found
+    return None
 
 
 def flow_config_json(cfg: FlowConfig | None = None) -> str:

@@ -339,10 +339,12 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
         :class:`~phonestereo.errors.ShapeError`).
     """
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"calibration file '{p}' is a folder; give the calibration.json in it")
     if not p.is_file():
         raise InputError(
-            f"calibration file '{p}' not found; give the path of a calibration.json (or import "
-            "an OpenCV YAML with import_opencv_yaml)"
+            f"calibration file '{p}' not found; give the path of a calibration.json (convert an "
+            "OpenCV YAML with `phonestereo convert-calibration FILE.yml calibration.json`)"
         )
     return calibration_from_dict(read_json(p, "calibration file"), p.name)
 

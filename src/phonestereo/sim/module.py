@@ -362,9 +362,9 @@ def load_module(name_or_path: str | Path) -> ModuleSpec:
                 "(`phonestereo module show folded-x3 --json` prints the schema)"
             )
         try:
-            text = path.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read module file {path}: {exc}") from exc
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read module file {path} (UTF-8 JSON): {exc}") from exc
         source = f"file {path}"
     try:
         data = json.loads(text)

@@ -117,6 +117,19 @@ TELE_ISP = IspRanges(denoise_strength=(1.0, 3.0), denoise_radius_px=(1.2, 2.5),
                      jpeg_quality=(85, 95))
 
 
+#: What the low end (and, for a fraction, the high end) of a physical range must satisfy.
+_SIGNS = {
+    **dict.fromkeys(("baseline_mm", "wide_hfov_deg", "wide_sensor_diagonal_mm",
+                     "tele_sensor_diagonal_mm", "tele_focal_length_mm", "wide_f_number",
+                     "tele_f_number", "heating_tau_s", "full_well_e"), "> 0"),
+    **dict.fromkeys(("distortion_scale", "focus_noise_scale", "heating_drift_px",
+                     "heating_rise_c", "wide_sag_px_per_g", "tele_sag_px_per_g",
+                     "af_error_dioptre", "factory_noise_scale", "handheld_rotation_deg",
+                     "handheld_translation_mm", "read_noise_e"), ">= 0"),
+    "af_failure_rate": "within [0, 1]",
+}
+
+
 class ModuleRanges(BaseModel):
     """The ranges random modules are drawn from (module docstring; units in the names)."""
 
@@ -164,6 +177,13 @@ class ModuleRanges(BaseModel):
             raise PhysicsError(f"width_px {list(self.width_px)} is too small for a camera")
         if self.pixel_pitch_um[0] <= 0 or self.focal_ratio[0] < 1:
             raise PhysicsError("pixel_pitch_um must be > 0 and focal_ratio >= 1 (a tele)")
+        for name, sign in _SIGNS.items():
+            lo, hi = getattr(self, name)
+            if not (lo > 0 if sign == "> 0" else lo >= 0 and (sign == ">= 0" or hi <= 1)):
+                why = " (a stereo pair's cameras stand apart)" if name == "baseline_mm" else ""
+                raise PhysicsError(f"range {name} must be {sign}{why}, got {[lo, hi]}")
+        if self.wide_hfov_deg[1] >= 180:
+            raise PhysicsError(f"range wide_hfov_deg must be < 180, got {list(self.wide_hfov_deg)}")
         return self
 
 
@@ -179,8 +199,8 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
     if path is not None:
         p = Path(path)
         try:
-            user = json.loads(p.read_text())
-        except OSError as exc:
+            user = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"cannot read --ranges file {p}: {exc}") from None
         except json.JSONDecodeError as exc:
             raise InputError(f"--ranges file {p} is not valid JSON: {exc.msg} at line "
@@ -196,9 +216,10 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
     try:
         return ModuleRanges.model_validate(base)
     except ValidationError as err:
-        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())
+        msgs = "; ".join(("{}: ".format(".".join(map(str, e["loc"]))) if e["loc"] else "")
+                         + e["msg"].removeprefix("Value error, ") for e in err.errors())
         raise InputError(
-            f"ranges are invalid ({msgs}); the keys and defaults are in "
+            f"--ranges: the ranges are invalid ({msgs}); the keys and defaults are in "
             f"phonestereo/sim/{RANGES_FILE} (docs/module-random.md)"
         ) from None
 

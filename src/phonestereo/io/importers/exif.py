@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime as dt
 import glob
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -129,8 +130,11 @@ def import_exif(
         raise InputError(
             f"--orientation {orientation!r} is not a bucket; use one of {list(BUCKETS)}"
         )
-    if time_offset_s < 0:
-        raise InputError("--time-offset-s must be >= 0 seconds (camera app start to first pair)")
+    if not (math.isfinite(time_offset_s) and time_offset_s >= 0):
+        raise InputError(f"--time-offset-s must be a number of seconds >= 0 (camera app start to "
+                         f"first pair), got {time_offset_s}")
+    if not (math.isfinite(max_gap_s) and max_gap_s > 0):
+        raise InputError(f"--max-gap-s must be a positive number of seconds, got {max_gap_s}")
     cal = load_calibration(calibration)
     wides, teles = _glob(wide_glob, "WIDE_GLOB"), _glob(tele_glob, "TELE_GLOB")
     fw = [s.focal_length_mm for s in wides if s.focal_length_mm]
