@@ -189,3 +189,25 @@ def test_the_first_peak_must_beat_every_near_alias_not_only_the_second() -> None
     why, pc = coarse_verdict(left, right, BOX, staged, RoiConfig())
     # (here the truth even wins its tiles: t = −171 for the staged peak against it)
     assert "ambiguous" in why and "20 px" in why and pc is not None and pc.t < 2.0, why
+
+
+def test_a_box_beyond_the_teles_view_does_not_hide_why_the_roi_cannot_be_measured() -> None:
+    """random-5008 (×5.9 tele, a 335-px view in the wide): the box inside the tele's view finds
+    the chessboard ambiguous, the larger boxes after it reach where the tele sees nothing and
+    do not correlate. The capture's reason is the ambiguity, not "does not correlate" (the
+    gate is the same; only its reason changes)."""
+    rng = np.random.default_rng(1)
+    left = _chessboard(600, 700, 26.5, 4.0)
+    left_n = left + rng.normal(0, 2, left.shape).astype(np.float32)
+    right = _tele(left, 10.0, 1.03, rng)
+    view = np.zeros_like(right)  # the tele sees only about BOX
+    x, y, w, h = BOX
+    sl = np.s_[max(y - 70, 0):y + h + 70, max(x - 70, 0):x + w + 70]
+    view[sl] = right[sl]
+    big = (10, 10, 680, 580)
+    assert coarse_search(left_n, view, big, -2, 64, rows=8).peak < RoiConfig().coarse_min_zncc
+    ch = coarse_peak(left_n, view, [BOX, big], 64, RoiConfig())
+    assert "ambiguous" in ch.reason and ch.box == BOX, ch.reason
+    # a box that never correlated keeps its own reason when it is the only one
+    only = coarse_peak(left_n, view, [big], 64, RoiConfig())
+    assert "does not correlate" in only.reason

@@ -111,7 +111,16 @@ def _first_usable(
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
     """The first box whose coarse peak can be used (``first``: the first box's peak on this
     very pair, already searched; ``maps``: its tiles' maps about that peak; ``before``: called
-    with each box before it is searched)."""
+    with each box before it is searched).
+
+    When none can, the verdict returned is that of the first box that correlated (peak ≥
+    ``coarse_min_zncc``) and failed a later test, if any, else the last box's: a larger box
+    that reaches beyond what the tele sees does not correlate whatever the ROI holds, and its
+    "does not correlate" would hide why the ROI itself cannot be measured (random-5008's ×5.9
+    tele sees 335 px of the wide; the box inside its view read the chessboard's true peak 0.92
+    and an alias 0.86, "ambiguous", while the 418- and 791-px boxes after it read 0.32 and 0.15
+    and gave the capture's reason: "no texture, occluded, or outside the tele's view")."""
+    told: tuple[Box, CoarsePeak, PeakContrast | None, str] | None = None
     for i, cbox in enumerate(boxes):
         if i == 0 and first is not None:
             cp = first
@@ -121,8 +130,10 @@ def _first_usable(
             cp = coarse_search(lw, rt, cbox, cfg.far_disparity_px, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg, maps if i == 0 else None)
         if not why:
-            break
-    return cbox, cp, pc, why
+            return cbox, cp, pc, why
+        if told is None and np.isfinite(cp.d) and cp.peak >= cfg.coarse_min_zncc:
+            told = (cbox, cp, pc, why)
+    return told if told is not None else (cbox, cp, pc, why)
 
 
 def coarse_peak(
