@@ -189,3 +189,45 @@ def test_the_first_peak_must_beat_every_near_alias_not_only_the_second() -> None
     why, pc = coarse_verdict(left, right, BOX, staged, RoiConfig())
     # (here the truth even wins its tiles: t = −171 for the staged peak against it)
     assert "ambiguous" in why and "20 px" in why and pc is not None and pc.t < 2.0, why
+
+
+def test_a_box_beyond_the_teles_view_does_not_hide_why_the_roi_cannot_be_measured() -> None:
+    """random-5008 (×5.9 tele, a 335-px view in the wide): the box inside the tele's view finds
+    the chessboard ambiguous, the larger boxes after it reach where the tele sees nothing and
+    do not correlate. The capture's reason is the ambiguity, not "does not correlate" (the
+    gate is the same; only its reason changes)."""
+    rng = np.random.default_rng(1)
+    left = _chessboard(600, 700, 26.5, 4.0)
+    left_n = left + rng.normal(0, 2, left.shape).astype(np.float32)
+    right = _tele(left, 10.0, 1.03, rng)
+    view = np.zeros_like(right)  # the tele sees only about BOX
+    x, y, w, h = BOX
+    sl = np.s_[max(y - 70, 0):y + h + 70, max(x - 70, 0):x + w + 70]
+    view[sl] = right[sl]
+    big = (10, 10, 680, 580)
+    assert coarse_search(left_n, view, big, -2, 64, rows=8).peak < RoiConfig().coarse_min_zncc
+    ch = coarse_peak(left_n, view, [BOX, big], 64, RoiConfig())
+    assert "ambiguous" in ch.reason and ch.box == BOX, ch.reason
+    # a box that never correlated keeps its own reason when it is the only one
+    only = coarse_peak(left_n, view, [big], 64, RoiConfig())
+    assert "does not correlate" in only.reason
+
+
+def test_a_wt_scale_below_the_prescale_drift_is_corrected_once_the_uncorrected_box_fails() -> None:
+    """A 3 % W-T scale moves a 180-px box's edges by 2.7 px, under the 4 px that pre-scale the
+    tele first, yet decorrelates a fine texture: uncorrected the box reads 0.44 (< 0.5, "does
+    not correlate") while its tiles read 0.91 and the scale. The corrected pair is then tried
+    and finds the true disparity (random-5012: a ×5.9 tele focused per stack, 2.4–2.7 % at
+    2–4 m, its charts from 3.2 m gated "does not correlate" before, 3 of 6 measured after)."""
+    rng = np.random.default_rng(2)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (600, 700)).astype(np.float32), (0, 0), 1.0)
+    left = img + rng.normal(0, 2, img.shape).astype(np.float32)
+    right = _tele(img, 10.0, 1.03, rng)
+    box = (150, 200, 180, 160)
+    cfg = RoiConfig()
+    assert 0.03 * 0.5 * max(box[2:]) < cfg.coarse_max_scale_drift_px
+    assert coarse_search(left, right, box, -2, 64, rows=8).peak < cfg.coarse_min_zncc
+    ch = coarse_peak(left, right, [box], 64, cfg, center=(200.0, 300.0))
+    assert ch.reason == "" and abs(ch.peak.d - 10.0) < 0.3 and abs(ch.scale - 1.03) < 0.003
+    # without the tele's centre (no W-T scale in the flow) the box stays gated, saying why
+    assert "does not correlate" in coarse_peak(left, right, [box], 64, cfg).reason

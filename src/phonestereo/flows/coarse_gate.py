@@ -111,7 +111,16 @@ def _first_usable(
 ) -> tuple[Box, CoarsePeak, PeakContrast | None, str]:
     """The first box whose coarse peak can be used (``first``: the first box's peak on this
     very pair, already searched; ``maps``: its tiles' maps about that peak; ``before``: called
-    with each box before it is searched)."""
+    with each box before it is searched).
+
+    When none can, the verdict returned is that of the first box that correlated (peak ≥
+    ``coarse_min_zncc``) and failed a later test, if any, else the last box's: a larger box
+    that reaches beyond what the tele sees does not correlate whatever the ROI holds, and its
+    "does not correlate" would hide why the ROI itself cannot be measured (random-5008's ×5.9
+    tele sees 335 px of the wide; the box inside its view read the chessboard's true peak 0.92
+    and an alias 0.86, "ambiguous", while the 418- and 791-px boxes after it read 0.32 and 0.15
+    and gave the capture's reason: "no texture, occluded, or outside the tele's view")."""
+    told: tuple[Box, CoarsePeak, PeakContrast | None, str] | None = None
     for i, cbox in enumerate(boxes):
         if i == 0 and first is not None:
             cp = first
@@ -121,8 +130,10 @@ def _first_usable(
             cp = coarse_search(lw, rt, cbox, cfg.far_disparity_px, d_max, rows=cfg.coarse_rows)
         why, pc = coarse_verdict(lw, rt, cbox, cp, cfg, maps if i == 0 else None)
         if not why:
-            break
-    return cbox, cp, pc, why
+            return cbox, cp, pc, why
+        if told is None and np.isfinite(cp.d) and cp.peak >= cfg.coarse_min_zncc:
+            told = (cbox, cp, pc, why)
+    return told if told is not None else (cbox, cp, pc, why)
 
 
 def coarse_peak(
@@ -149,7 +160,9 @@ def coarse_peak(
     its box at 2.4 m correlate 0.55 (tiles 0.80) and the chessboard's alias one period away
     win over the true disparity; corrected, the true peak wins 0.96 to 0.83, and at 3.6-4 m
     the box correlates 0.95 instead of 0.22-0.30. If the corrected pair gives no usable peak
-    the uncorrected one is tried too.
+    the uncorrected one is tried too. Below that drift the uncorrected pair is tried first and,
+    when no box of it can be used, the corrected one after it (a smaller scale still
+    decorrelates a fine texture; a capture measured without it is measured as before).
 
     ``partial``: the corrected tele is computed only where the coarse step reads it (each
     box's strip as it is tried, :mod:`~phonestereo.flows.tele_roi_scale`, the same pixels),
@@ -174,9 +187,13 @@ def coarse_peak(
         if np.isfinite(p0.d):
             s, _, tz = tile_wt_scale(lw, rt, b0, p0.d, p0.e, center[1], keep=maps)
     drift = abs(s - 1.0) * 0.5 * max(b0[2], b0[3]) if np.isfinite(s) else 0.0
-    prescale = tz >= cfg.coarse_min_zncc and drift > cfg.coarse_max_scale_drift_px
-    why_s = ""
-    if prescale and center is not None:
+    scalable = center is not None and tz >= cfg.coarse_min_zncc and np.isfinite(s) and s != 1.0
+    prescale = scalable and drift > cfg.coarse_max_scale_drift_px
+
+    def scaled() -> tuple[CoarseChoice | None, str]:
+        """The boxes on the tele window with the tiles' W-T scale corrected: the choice, or
+        None and why not."""
+        assert center is not None
         if on_prescale is not None:
             on_prescale(s)
         fill = None
@@ -194,12 +211,29 @@ def coarse_peak(
             rt_s = rescale_tele(rt, s, center)
         cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg, before=fill)
         if not why:
-            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz)
-        why_s = f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
+            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz), ""
+        return None, f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
+
+    why_s = ""
+    if prescale:
+        choice, why_s = scaled()
+        if choice is not None:
+            return choice
     cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None,
                                       before=None if cover is None else cover.cover_box)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
+    if scalable and not prescale:
+        # Below the drift that pre-scales first, a W-T scale still decorrelates a fine
+        # periodic texture: random-5012's ×5.9 periscope (tele focused per stack, 20 mm,
+        # calibrated at 0.6 m) shows 2.4–2.7 % at 2–4 m, 2.4 px at a 180-px box's edges, and
+        # its chessboard's whole-box ZNCC fell from 0.93 at 0.9 m to 0.58 at 4 m (tiles 0.91),
+        # the true peak no longer beating an alias. Tried only once the uncorrected pair has
+        # failed, so a capture measured without it is measured as before.
+        choice, why_s = scaled()
+        if choice is not None:
+            return choice
+        why_s = ""  # the uncorrected pair's reason stands
     if why_s:
         why = why_s
     elif np.isfinite(tz) and tz < cfg.coarse_min_zncc and "does not correlate" in why:
