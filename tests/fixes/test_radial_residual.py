@@ -10,6 +10,7 @@ from phonestereo.fixes.radial_residual import (
     fit_capture_radial,
     pool_radial,
     radial_from_dict,
+    radial_shift,
 )
 
 CENTER = (520.0, 380.0)
@@ -56,3 +57,31 @@ def test_too_few_matches_or_no_gain_give_no_fit_and_the_dict_round_trips() -> No
     assert pool_radial([None, None]) is None
     fit = fit_capture_radial(*_capture(rng, 0.3), CENTER)
     assert fit is not None and radial_from_dict(fit.to_dict()) == fit
+
+
+def test_p_centred_where_the_residual_is_centred_carries_its_x_part_to_the_centre() -> None:
+    """The residual is the wide's factory misfit, radial about the wide's principal point; it
+    rises steeply near it (~0.3 % of r, as on the random modules: +0.27 px at r ≈ 175 px, zero
+    at ≈ 425 px). P fitted from e alone about that centre gives the x part (what a disparity
+    carries) within 0.015 px over the central ±150 px where charts are measured; about a centre
+    22 px away (the tele's principal point on random-3030) it is off by ~0.04 px there, 0.3 %
+    of a 2 m chart's disparity (docs/module-random.md, session 19)."""
+    wide_c = np.array([540.0, 390.0])
+
+    def p_true(r: np.ndarray) -> np.ndarray:
+        return 0.0031 * r - 0.0000073 * r**2
+
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        q = rng.uniform([20, 20], [1060, 760], (600, 2))
+        r, u = radial_geometry(q, wide_c)
+        e = u[:, 1] * p_true(r) + rng.normal(0, 0.05, 600)
+        central = wide_c + rng.uniform(-150, 150, (300, 2))
+        rc, uc = radial_geometry(central, wide_c)
+        errs = []
+        for c in (wide_c, wide_c + np.array([22.0, 3.0])):
+            fit = fit_capture_radial(q, e, (float(c[0]), float(c[1])))
+            assert fit is not None
+            miss = radial_shift(fit, central)[:, 0] - uc[:, 0] * p_true(rc)
+            errs.append(float(np.sqrt(np.mean(miss**2))))
+        assert errs[0] < 0.015 and errs[1] > 0.03, errs

@@ -2,11 +2,23 @@
 
 A factory describes a lens whose radial polynomial has odd terms with OpenCV's even-order model
 (§3.2 reason 2); its distortion also moves with focus (reason 3). What is left after
-rectification is a radial displacement δ(q) = P(r)·û about the tele's principal point, the same
-in e (its y part) as in d (its x part), and it differs between the sensor positions where the
-faces were learned and where a chart is measured, which the learned correction's smooth field
-does not carry (docs/module-random.md, session 11). The flows therefore, when
-``FlowConfig.radial_residual`` is on:
+rectification is a radial displacement δ(q) = P(r)·û, the same in e (its y part) as in d (its x
+part), and it differs between the sensor positions where the faces were learned and where a
+chart is measured, which the learned correction's smooth field does not carry
+(docs/module-random.md, session 11).
+
+**Its centre is the wide's principal point** (:func:`wide_center_px`). The factory fits each
+lens over its own whole field, so the wide's even-order model is a compromise over angles up to
+its corners and misses most where the tele looks, about its centre, while the tele's model is
+fitted over those same central angles and misses little; in the rectified frame (the wide's
+pixels) the tele's residual is smaller still by the zoom. Until session 19 P was centred on the
+tele's principal point, 20–30 px away on the random modules: near the centre P rises steeply
+(~0.3 % of r), so a misplaced centre moved the faces' and the chart's corrections apart, and on
+random-3030 the fix added +0.7 % to every depth under every oracle; centred on the wide's
+principal point the 42 kept sets' mean errors read 0.206 % in rms instead of 0.271 %
+(docs/module-random.md, session 19).
+
+The flows therefore, when ``FlowConfig.radial_residual`` is on:
 
 - in the learning, fit P (:class:`~phonestereo.fixes.distortion.RadialResidualFix`, degree
   :data:`RADIAL_DEGREE`) to the non-disparity error e of each face capture's whole-view W-T
@@ -45,12 +57,35 @@ import numpy as np
 from phonestereo.errors import InputError
 from phonestereo.fixes.distortion import RadialResidualFix, radial_geometry
 from phonestereo.geometry.checks import as_points
+from phonestereo.rectification import Rectification
 
 #: n of P(r): a cubic follows an odd lens's residual over the tele's field (degree 4 chased the
 #: e noise of one capture's matches on the random modules; 2 left a third of the residual).
 RADIAL_DEGREE = 3
 #: Fewest finite matches for one capture's fit (its e scatters ~0.1 px per match).
 MIN_MATCHES = 50
+
+
+def wide_center_px(rect: Rectification) -> tuple[float, float]:
+    """The centre of the residual radial distortion: the wide's principal point in ``rect``'s
+    rectified frame, px (module docstring).
+
+    Examples
+    --------
+    A ×3 tele 12 mm along −y, turned 0.5° about x (the rectified frame turns with the baseline,
+    so the principal point moves):
+
+    >>> from phonestereo.geometry import Camera, Rig, Transform
+    >>> cam = Camera.from_matrix((1000, 750), [[800, 0, 505], [0, 800, 370], [0, 0, 1]])
+    >>> T = Transform.from_rotvec([np.deg2rad(0.5), 0, 0], [0, -0.012, 0])
+    >>> rect = Rectification.from_rig(Rig(cam, cam.scaled(3.0), T), "canonical")
+    >>> c = wide_center_px(rect)
+    >>> bool(np.allclose(rect.unrectify_wide([c]), [[505, 370]]))
+    True
+    """
+    pp = np.asarray(rect.rig.wide.K, dtype=np.float64)[:2, 2]
+    c = np.asarray(rect.points_wide(pp[None, :]), dtype=np.float64).reshape(2)
+    return float(c[0]), float(c[1])
 
 
 def fit_capture_radial(
@@ -66,7 +101,7 @@ def fit_capture_radial(
     e : array_like, shape (N,)
         Their non-disparity error, px.
     center : (x, y)
-        The tele's principal point, rectified px (the W-T scale's centre).
+        The radial centre, rectified px: the wide's principal point (:func:`wide_center_px`).
     degree : int
         n of P.
     """
@@ -138,4 +173,5 @@ __all__ = [
     "pool_radial",
     "radial_from_dict",
     "radial_shift",
+    "wide_center_px",
 ]

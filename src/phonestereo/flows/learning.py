@@ -32,7 +32,7 @@ import numpy as np
 from phonestereo.errors import InputError
 from phonestereo.features.landmarks import LandmarkBackend
 from phonestereo.fixes.distortion import RadialResidualFix
-from phonestereo.fixes.radial_residual import fit_capture_radial, radial_shift
+from phonestereo.fixes.radial_residual import fit_capture_radial, radial_shift, wide_center_px
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_backend
 from phonestereo.flows.face_wt import settle, start_wt
@@ -248,7 +248,7 @@ def _learn(
             for o in obs
         )
         if config.radial_residual:  # §3.2: the e of the whole view's matches gives P(r)
-            radial = fit_capture_radial(m.xy, m.e, wt.center_px)
+            radial = fit_capture_radial(m.xy, m.e, wide_center_px(rect))
             stages["radial_residual"] = None if radial is None else radial.to_dict()
             if radial is not None:
                 dx = radial_shift(radial, np.array([[o.x_px, o.y_px] for o in obs]))[:, 0]
