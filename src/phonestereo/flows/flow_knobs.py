@@ -122,7 +122,8 @@ FLOW_KNOBS: dict[str, tuple[str, str, str]] = {
         "bool",
         "Take the rectified pair's residual radial distortion out of every disparity (thesis "
         "§3.2's non-disparity-axis fix, fixes/radial_residual.py): P(r) about the wide's "
-        "principal point (the wide's factory misfit; session 19), fitted to each face capture's whole-view matches' e and pooled over "
+        "principal point (the wide's factory misfit; session 19), fitted to each face "
+        "capture's whole-view matches' e and pooled over "
         "the learning captures, corrects the faces and the ROI's matches (before its W-T "
         "scale) alike (session 14: each face on its own capture's fit scattered).",
         "On: the factory's even-order lens model leaves this residual on an odd lens. With the "
