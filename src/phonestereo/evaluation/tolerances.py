@@ -30,6 +30,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from phonestereo.errors import InputError
+from phonestereo.io.json_text import read_text
 from phonestereo.sim.module import ModuleSpec, parse_module
 
 _STRICT = ConfigDict(extra="forbid", frozen=True)
@@ -185,13 +186,7 @@ def validate_tolerances(tolerances: ToleranceSet, spec: ModuleSpec) -> Tolerance
 
 
 def _read_text(path: Path) -> Any:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(
-            f"cannot read tolerances file {path}: {exc}; pass a UTF-8 JSON (or YAML) file "
-            "to --tolerances"
-        ) from None
+    text = read_text(path, "tolerances file", "pass a UTF-8 JSON (or YAML) file to --tolerances")
     if path.suffix.lower() in (".yaml", ".yml"):
         try:
             import yaml  # type: ignore[import-untyped]

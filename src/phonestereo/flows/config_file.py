@@ -34,6 +34,7 @@ from phonestereo.features.match_config import MatchConfig
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.config_knobs import KNOBS
 from phonestereo.flows.roi_disparity import RoiConfig
+from phonestereo.io.json_text import read_text
 
 #: Each dataclass with a nested dataclass field: (field name, its class, its KNOBS section).
 _NESTED: dict[type[Any], tuple[str, type[Any], str]] = {
@@ -130,14 +131,8 @@ def load_flow_config(path: str | os.PathLike[str] | None) -> FlowConfig:
     p = Path(path)
     if p.is_dir():
         raise InputError(f"--config {p} is a folder; give a JSON file (phonestereo config show)")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
-        raise InputError(
-            f"cannot read --config {p} ({why or exc}); write one with "
-            "`phonestereo config show > flow.json` and edit it"
-        ) from None
+    text = read_text(p, "--config", "write one with `phonestereo config show > flow.json` and "
+                     "edit it")
     try:
         data = json.loads(text)
     except ValueError as exc:

@@ -29,6 +29,29 @@ def parse_json(text: str, source: str) -> Any:
         ) from exc
 
 
+def read_text(path: Path, what: str, hint: str = "") -> str:
+    """The UTF-8 text of file ``path``; :class:`InputError` ``"cannot read <what> <path>
+    (<why>)[; <hint>]"`` when it cannot be read (missing, a folder, no permission, or not
+    UTF-8: a photo or an archive picked by mistake).
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = Path(d) / "m.json"
+    ...     _ = p.write_bytes(b"\\xff\\xd8\\xff")
+    ...     try:
+    ...         read_text(p, "module file", "pass a module JSON")
+    ...     except InputError as err:
+    ...         print(str(err).split(" (")[1])
+    not UTF-8 text); pass a module JSON
+    """
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        why = "not UTF-8 text" if isinstance(exc, UnicodeDecodeError) else exc.strerror or exc
+        tail = f"; {hint}" if hint else ""
+        raise InputError(f"cannot read {what} {path} ({why}){tail}") from None
+
+
 def read_json(path: Path, what: str) -> Any:
     """The JSON document in file ``path`` (UTF-8); :class:`InputError` ``"cannot read <what>
     '<path>': …"`` when it cannot be read, :func:`parse_json`'s (named by the file name) when
@@ -40,4 +63,4 @@ def read_json(path: Path, what: str) -> Any:
     return parse_json(text, path.name)
 
 
-__all__ = ["parse_json", "read_json"]
+__all__ = ["parse_json", "read_json", "read_text"]

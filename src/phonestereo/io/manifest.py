@@ -39,7 +39,7 @@ import pydantic
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from phonestereo.errors import InputError
-from phonestereo.io.json_text import parse_json
+from phonestereo.io.json_text import parse_json, read_text
 from phonestereo.io.manifest_fields import (
     ORIENTATION_BUCKETS,
     normalise_orientation,
@@ -305,10 +305,7 @@ def load_capture_set(folder: str | os.PathLike[str], *, check_images: bool = Tru
             f"no {MANIFEST_NAME} in '{root}'; a capture set is a folder with {MANIFEST_NAME} "
             "and the images it lists (docs/capture-set.md)"
         )
-    try:
-        text = manifest_path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read '{manifest_path}': {exc}") from exc
+    text = read_text(manifest_path, "the manifest")
     manifest = parse_manifest(text, str(manifest_path.name))
     cs = CaptureSet(root, manifest)
     if check_images:

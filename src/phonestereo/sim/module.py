@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from phonestereo.errors import InputError, PhysicsError
 from phonestereo.geometry import LENS_MODELS, LensModel, make_lens
+from phonestereo.io.json_text import read_text
 from phonestereo.sim.isp_spec import IspSpec
 
 PRESET_PACKAGE = "phonestereo.sim"
@@ -361,10 +362,7 @@ def load_module(name_or_path: str | Path) -> ModuleSpec:
                 f"{list(list_presets())}, or pass the path of a module JSON file "
                 "(`phonestereo module show folded-x3 --json` prints the schema)"
             )
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read module file {path} (UTF-8 JSON): {exc}") from exc
+        text = read_text(path, "module file", "pass a module JSON (UTF-8)")
         source = f"file {path}"
     try:
         data = json.loads(text)

@@ -59,6 +59,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from phonestereo.errors import InputError, PhysicsError
+from phonestereo.io.json_text import read_text
 from phonestereo.sim.module import ModuleSpec, load_module, parse_module
 
 RANGES_FILE = "random_ranges.json"
@@ -198,10 +199,9 @@ def load_ranges(path: str | Path | None = None) -> ModuleRanges:
     base = json.loads(resources.files("phonestereo.sim").joinpath(RANGES_FILE).read_text())
     if path is not None:
         p = Path(path)
+        text = read_text(p, "--ranges file")
         try:
-            user = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read --ranges file {p}: {exc}") from None
+            user = json.loads(text)
         except json.JSONDecodeError as exc:
             raise InputError(f"--ranges file {p} is not valid JSON: {exc.msg} at line "
                              f"{exc.lineno}") from None
