@@ -15,7 +15,7 @@ pixels) the tele's residual is smaller still by the zoom. Until session 19 P was
 tele's principal point, 20–30 px away on the random modules: near the centre P rises steeply
 (~0.3 % of r), so a misplaced centre moved the faces' and the chart's corrections apart, and on
 random-3030 the fix added +0.7 % to every depth under every oracle; centred on the wide's
-principal point the 42 kept sets' mean errors read 0.206 % in rms instead of 0.271 %
+principal point the 65 kept sets' mean errors read 0.225 % in rms instead of 0.290 %
 (docs/module-random.md, session 19).
 
 The flows therefore, when ``FlowConfig.radial_residual`` is on:
