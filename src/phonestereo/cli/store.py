@@ -33,8 +33,10 @@ def _open(path: Path, write: bool = False) -> FixStore:
     """Open an existing store (never create one from an inspection command)."""
     if not path.exists():
         raise StoreError(f"the fix store '{path}' does not exist; check the path")
+    if not write:
+        return open_for_reading(path)  # refuses an empty file itself
     refuse_empty(path)
-    return FixStore(path) if write else open_for_reading(path)
+    return FixStore(path)
 
 
 def _kb(n: int) -> str:

@@ -53,14 +53,10 @@ def read_text(path: Path, what: str, hint: str = "") -> str:
 
 
 def read_json(path: Path, what: str) -> Any:
-    """The JSON document in file ``path`` (UTF-8); :class:`InputError` ``"cannot read <what>
-    '<path>': …"`` when it cannot be read, :func:`parse_json`'s (named by the file name) when
+    """The JSON document in file ``path`` (UTF-8); :func:`read_text`'s :class:`InputError` when
+    it cannot be read, :func:`parse_json`'s (named by the file name) when
     it does not parse."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read {what} '{path}': {exc}") from exc
-    return parse_json(text, path.name)
+    return parse_json(read_text(path, what), path.name)
 
 
 __all__ = ["parse_json", "read_json", "read_text"]

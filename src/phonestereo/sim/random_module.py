@@ -118,7 +118,9 @@ TELE_ISP = IspRanges(denoise_strength=(1.0, 3.0), denoise_radius_px=(1.2, 2.5),
                      jpeg_quality=(85, 95))
 
 
-#: What the low end (and, for a fraction, the high end) of a physical range must satisfy.
+#: What a physical range (low, high) must satisfy, by what the message says of it.
+_BOUNDS: dict[str, Any] = {"> 0": lambda lo, hi: lo > 0, ">= 0": lambda lo, hi: lo >= 0,
+                           "within [0, 1]": lambda lo, hi: lo >= 0 and hi <= 1}
 _SIGNS = {
     **dict.fromkeys(("baseline_mm", "wide_hfov_deg", "wide_sensor_diagonal_mm",
                      "tele_sensor_diagonal_mm", "tele_focal_length_mm", "wide_f_number",
@@ -180,7 +182,7 @@ class ModuleRanges(BaseModel):
             raise PhysicsError("pixel_pitch_um must be > 0 and focal_ratio >= 1 (a tele)")
         for name, sign in _SIGNS.items():
             lo, hi = getattr(self, name)
-            if not (lo > 0 if sign == "> 0" else lo >= 0 and (sign == ">= 0" or hi <= 1)):
+            if not _BOUNDS[sign](lo, hi):
                 why = " (a stereo pair's cameras stand apart)" if name == "baseline_mm" else ""
                 raise PhysicsError(f"range {name} must be {sign}{why}, got {[lo, hi]}")
         if self.wide_hfov_deg[1] >= 180:
