@@ -118,15 +118,13 @@ class HeatingTerm:
     #: τ of the time-indexed σ, s (the flows pass the one the warm-up gate assumes,
     #: ``FlowConfig.warmup_s`` / 2.6).
     tau_s: float = 70.0
-    #: σ of the gain over disparity (px per px of d) in the same capture-level fit, the drift
-    #: allowed for, ⊕ (when the drift is significant and no temperature term takes it out of the
-    #: observations) how far allowing for the drift moves the gain from the fit without it: what
-    #: the captures can tell of the gain when their times or temperatures move with their
-    #: distances (module docstring); NaN when the fit could not be made. Set whether or not the
-    #: drift itself is significant: a drift the captures cannot tell from zero still widens the
-    #: gain's σ, but its shift is then noise (of variance σ²_with − σ²_alone) and adding it would
-    #: count the drift's freedom twice (over the 29 bench sets the realised gain errors read 0.65
-    #: of that σ in rms, 0.74 of this one, none beyond 2σ; docs/module-random.md, session 16).
+    #: σ of the gain over disparity (px per px of d) that the captures can tell when their
+    #: times or temperatures move with their distances (module docstring): with an applied
+    #: temperature term (the drift taken out of the observations), its σ in the fit with the
+    #: drift; otherwise the fits with and without a drift averaged by their evidence
+    #: (:func:`_averaged_gain_sigma`: a drift the captures cannot tell from zero widens the
+    #: gain's σ by its weight, a clear one by all of it and its shift). NaN when the fit could
+    #: not be made. Set whether or not the drift itself is significant.
     gain_sigma: float = float("nan")
 
     @classmethod
@@ -185,11 +183,7 @@ class HeatingTerm:
         need = APPLY_SIGNIFICANCE if index == "temperature_c" else SIGNIFICANCE
         significant = abs(k) > need * k_sigma
         applied = significant and index == "temperature_c"
-        # The gain's σ with the drift in the fit; when the drift is significant and not taken
-        # out of the observations (an applied temperature term), ⊕ how far it moves the gain.
-        alone, _, _ = _ols(np.delete(x[use], 2, axis=1), c_i[use])
-        shift = 0.0 if applied or not significant or alone is None else float(beta[1] - alone[1])
-        g_sigma = float(np.hypot(sd[1], shift))
+        g_sigma = float(sd[1]) if applied else _averaged_gain_sigma(x[use], c_i[use])
         if not significant:
             return cls(False, f"no significant drift over the learning captures' {index}: "
                        f"{k:.3g} ± {k_sigma:.2g} px per unit (needs {need:g}σ)", k, k_sigma,
@@ -230,6 +224,27 @@ class HeatingTerm:
             "n_captures": self.n_captures,
             "gain_sigma": None if not np.isfinite(self.gain_sigma) else round(self.gain_sigma, 6),
         }
+
+
+def _averaged_gain_sigma(x: np.ndarray, y: np.ndarray) -> float:
+    """σ of the gain a correction learned *without* a drift term (column 1 of ``x``, the drift
+    column 2) owes to a drift the captures may carry, px/px: the two models — no drift, a
+    linear drift — averaged by their evidence (BIC weights, Bayesian model averaging):
+    σ² = w₀·σ₀² + w₁·(σ₁² + (ĝ₀ − ĝ₁)²), σ₀, σ₁ the gain's σ in each fit and ĝ₀ − ĝ₁ how far
+    the drift moves it. A drift the captures cannot tell from zero keeps a weight of about
+    1 / (1 + √n) (n captures), not 1: with every learned set warm the drift fit's collinear
+    gain σ alone read the realised gain errors at 0.65–0.77 of it in rms (docs/module-random.md,
+    session 20); a clear drift takes the whole weight and its shift, as before."""
+    full, sd1, res1 = _ols(x, y)
+    alone, sd0, res0 = _ols(np.delete(x, 2, axis=1), y)
+    if full is None or alone is None:
+        return float(sd1[1]) if alone is None else float(sd0[1])
+    n = len(y)
+    rss1, rss0 = max(float(res1 @ res1), 1e-300), max(float(res0 @ res0), 1e-300)
+    # BIC₀ − BIC₁ = n·ln(RSS₀ / RSS₁) − ln n (the drift is one parameter more)
+    w1 = float(1.0 / (1.0 + np.exp(-0.5 * (n * np.log(rss0 / rss1) - np.log(n)))))
+    shift = float(full[1] - alone[1])
+    return float(np.sqrt((1 - w1) * sd0[1] ** 2 + w1 * (sd1[1] ** 2 + shift**2)))
 
 
 def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
