@@ -19,7 +19,7 @@ together unless σ carries them:
   only as good as the capture-level regression of offset on disparity says (captures, not
   faces, are the independent units); σ_x = σ_gain · (distance outside the learned range).
   When the learning captures' times (or temperatures) move with their distances, a warm-up
-  drift is indistinguishable from a gain: the gain's σ with the drift in the fit
+  drift is indistinguishable from a gain: the gain's σ under a possible drift
   (``drift_gain_sigma``, :attr:`~phonestereo.learning.heating_term.HeatingTerm.gain_sigma`)
   then applies about the learned centre d̄ at every disparity, σ = σ_g,drift · |d − d̄|
   (the larger of the two is taken);

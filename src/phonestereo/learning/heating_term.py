@@ -29,7 +29,9 @@ gives, when its slope is significant, a σ for the drift still to come (not a co
 warm-up curve's τ is unknown, see :attr:`HeatingTerm.index`).
 
 Either way the fit also says how well the captures tell the **gain** g from a drift
-(:attr:`HeatingTerm.gain_sigma`, its σ with the drift term in the fit). Faces learned near to
+(:attr:`HeatingTerm.gain_sigma`: the fits without and with the drift term averaged by their
+evidence, so a drift the captures cannot tell from zero widens it by its weight only; session
+20). Faces learned near to
 far while the module still warms make time and disparity collinear: the drift cannot be
 separated from a gain, the field learns it as one, and only this σ shows it (random-1009: the
 learned gain read +1.95 %, +1.08 % with the faces' distances interleaved in time; the
