@@ -102,6 +102,19 @@ class CoarseChoice:
     #: Median tile ZNCC at the first box's peak, when it was computed (NaN otherwise).
     tile_zncc: float = float("nan")
 
+    def counts(self) -> dict[str, int]:
+        """The choice's figures for a measurement's ``counts`` (ZNCCs ×1000, the tile test's t
+        ×10, the pre-correction ×10⁴ when there was one)."""
+        peak, pc, out = self.peak.peak, self.contrast, {}
+        out["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
+        if pc is not None and np.isfinite(pc.t):
+            out["coarse_peak_t_x10"] = round(10 * max(min(pc.t, 999.0), -999.0))
+        if np.isfinite(self.tile_zncc):
+            out["coarse_tile_zncc_x1000"] = round(1000 * self.tile_zncc)
+        if self.scale != 1.0:
+            out["coarse_scale_x1e4"] = round(1e4 * self.scale)
+        return out
+
 
 def _first_usable(
     lw: Any, rt: Any, boxes: list[Box], d_max: int, cfg: RoiConfig,

@@ -27,7 +27,7 @@ from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import correct_matches
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
-from phonestereo.flows.band_gate import band_reason, band_split
+from phonestereo.flows.band_gate import band_reason, band_split, on_row
 from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
@@ -313,14 +313,8 @@ def measure_roi(
                      on_prescale=None if ahead is None else ahead.prescaled)
     if ch.box == box and len(cboxes) > 1:
         counts["coarse_context_dropped"] = 1
-    d0, peak, e0, pc, rt = ch.peak.d, ch.peak.peak, ch.peak.e, ch.contrast, ch.right
-    counts["coarse_zncc_x1000"] = round(1000 * peak) if np.isfinite(peak) else 0
-    if pc is not None and np.isfinite(pc.t):
-        counts["coarse_peak_t_x10"] = round(10 * max(min(pc.t, 999.0), -999.0))
-    if np.isfinite(ch.tile_zncc):
-        counts["coarse_tile_zncc_x1000"] = round(1000 * ch.tile_zncc)
-    if ch.scale != 1.0:
-        counts["coarse_scale_x1e4"] = round(1e4 * ch.scale)
+    d0, e0, rt = ch.peak.d, ch.peak.e, ch.right
+    counts.update(ch.counts())
     if ch.reason:
         return _fail(ch.reason, grid, counts)
     counts["coarse_e_px"] = int(e0)
@@ -369,7 +363,12 @@ def measure_roi(
         fit = fit_wt_scale(xy, xy - np.column_stack([d, e]), c_tele, sigma_px=res.sigma_e[idx])
         if fit.ok:
             d, e = fit.disparity(xy, xy - np.column_stack([d, e]))
+            row = on_row(e, fit.rms_e_px)  # a row alias of a repetitive chart is no match
+            counts["off_row"] = int((~row).sum())
+            xy, d, e, sd, idx = xy[row], d[row], e[row], sd[row], idx[row]
         wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
+    if len(d) < cfg.min_matches:  # the others were row aliases (on_row)
+        return _fail(f"{len(d)} matches on their rows (< {cfg.min_matches})", grid, counts)
     plane = fit_plane(xy, d, sd)
     if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
         split = band_split(xy_all, d_all, e_all, m2, fit, plane.predict, cfg)
