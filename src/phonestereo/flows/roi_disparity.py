@@ -368,7 +368,8 @@ def measure_roi(
             xy, d, e, sd, idx = xy[row], d[row], e[row], sd[row], idx[row]
         wt = replace(fit, scale=fit.scale * ch.scale, sigma_scale=fit.sigma_scale * ch.scale)
     if len(d) < cfg.min_matches:  # the others were row aliases (on_row)
-        return _fail(f"{len(d)} matches on their rows (< {cfg.min_matches})", grid, counts)
+        return _fail(f"{len(d)} matches on their rows (< {cfg.min_matches}), the rest row "
+                     "aliases of a repetitive texture: aim at less regular texture", grid, counts)
     plane = fit_plane(xy, d, sd)
     if wt is not None and wt.ok:  # one band about the plane, once the W-T scale's spread is out
         split = band_split(xy_all, d_all, e_all, m2, fit, plane.predict, cfg)
