@@ -68,6 +68,11 @@ class RectifyOptions:
     #: Gaussian pre-filter of an image that the rectification shrinks, σ = (s − 1)/2 raw pixels for
     #: a shrink factor s (scikit-image's rule).
     antialias: bool = True
+    #: Rectified rows the tele's image is moved down by (its rectified camera's c_y + this), px:
+    #: a known row error e = y_wide − y_tele of the calibration (a learned one, or the coarse
+    #: step's) taken out, so that searches over a few rows about e = 0 find it. Disparity (x) is
+    #: unchanged; an e measured in this frame is the calibration's e less this.
+    tele_row_shift_px: float = 0.0
 
     def __post_init__(self) -> None:
         if self.resolution not in get_args(Resolution):
@@ -78,6 +83,10 @@ class RectifyOptions:
         if not np.isfinite(s) or not 0.01 <= s <= 100:
             raise PhysicsError(f"scale must be a number in [0.01, 100], got {self.scale}")
         object.__setattr__(self, "scale", s)
+        shift = float(self.tele_row_shift_px)
+        if not np.isfinite(shift):
+            raise InputError(f"tele_row_shift_px must be finite, got {self.tele_row_shift_px}")
+        object.__setattr__(self, "tele_row_shift_px", shift)
         if self.roi is not None:
             object.__setattr__(self, "roi", _ints(self.roi, 4, "roi (x, y, w, h)"))
             if self.roi[2] <= 0 or self.roi[3] <= 0:
@@ -93,8 +102,8 @@ class RectifyOptions:
             object.__setattr__(self, name, int(v))
 
     def to_dict(self) -> dict[str, object]:
-        """JSON-ready dict of the options."""
-        return {
+        """JSON-ready dict of the options (``tele_row_shift_px`` only when not 0)."""
+        out: dict[str, object] = {
             "resolution": self.resolution,
             "scale": self.scale,
             "fov": self.fov,
@@ -104,6 +113,9 @@ class RectifyOptions:
             "grid_step_px": self.grid_step_px,
             "antialias": self.antialias,
         }
+        if self.tele_row_shift_px:
+            out["tele_row_shift_px"] = self.tele_row_shift_px
+        return out
 
 
 def _ints(value: object, n: int, name: str) -> tuple[int, ...]:

@@ -15,7 +15,7 @@ lens and focal length, the wide's orientation), and a wide pixel only moves by t
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -66,8 +66,9 @@ class Rectification:
     R_rect_wide: Array
     #: See ``R_rect_wide`` above.
     R_rect_tele: Array
-    #: ``wide_rect``, ``tele_rect``: The rectified cameras (same K and size; pinhole except in
-    #: ``tele-to-wide``, where both carry the wide's lens).
+    #: ``wide_rect``, ``tele_rect``: The rectified cameras (same K and size, the tele's c_y moved
+    #: by ``options.tele_row_shift_px``; pinhole except in ``tele-to-wide``, where both carry the
+    #: wide's lens).
     wide_rect: Camera
     #: See ``wide_rect`` above.
     tele_rect: Camera
@@ -125,7 +126,16 @@ class Rectification:
             template = Camera((1, 1), f, f, 0.0, 0.0)
         cams = {"wide": (rig.wide, R_wide), "tele": (rig.tele, R_tele)}
         rect = place_window(template, cams, opts)
-        return cls(m, rig, opts, R_wide, R_tele, rect, rect, k)
+        tele_rect = rect.shifted(0.0, opts.tele_row_shift_px) if opts.tele_row_shift_px else rect
+        return cls(m, rig, opts, R_wide, R_tele, rect, tele_rect, k)
+
+    def with_tele_rows(self, shift_px: float) -> Rectification:
+        """This rectification with the tele's rows moved by ``shift_px`` in all
+        (:attr:`RectifyOptions.tele_row_shift_px`; itself when that is unchanged)."""
+        if float(shift_px) == self.options.tele_row_shift_px:
+            return self
+        opts = replace(self.options, tele_row_shift_px=float(shift_px))
+        return Rectification.from_rig(self.rig, self.mode, opts)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Rectification:
