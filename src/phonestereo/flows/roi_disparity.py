@@ -47,6 +47,12 @@ from phonestereo.rectification import Rectification, RectifyOptions, check_pair
 F64 = Array
 
 
+#: How far from 0 the coarse step's rows are moved at most when its peak lies on their border
+#: (:func:`measure_roi`), px: three times the default ±8 rows. The issue's module ranges (heating
+#: drift up to 7 px per camera, factory noise up to 3×) reached 11–12 px (random-3056).
+MAX_ROW_OFFSET_PX = 24
+
+
 def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
     """The reference rectified frame of a calibration: ``mode``, shared field of view."""
     return Rectification.from_rig(rig, mode)
@@ -153,18 +159,22 @@ def _bounding_box(pts: F64, size: tuple[int, int]) -> tuple[int, int, int, int]:
 
 @lru_cache(maxsize=2)
 def _window(
-    rig: Rig, mode: str, ref: Rectification, roi: tuple[int, int, int, int], cfg: RoiConfig
+    rig: Rig, mode: str, ref: Rectification, roi: tuple[int, int, int, int], cfg: RoiConfig,
+    row_offset_px: int = 0,
 ) -> _Window:
-    """The window of ``roi`` (:class:`_Window`). Cached: the learning flow measures the W-T
-    scale over the same box (the tele's view) of every face capture of a calibration, and the
-    window's maps (~10 ms at 2000 × 1500) are then built once. Two entries: each holds its
-    window's maps and keeps ``ref`` alive (keyed by identity)."""
+    """The window of ``roi`` (:class:`_Window`), its tele's rows moved by ``row_offset_px``
+    (:attr:`~phonestereo.rectification.options.RectifyOptions.tele_row_shift_px`). Cached: the
+    learning flow measures the W-T scale over the same box (the tele's view) of every face
+    capture of a calibration, and the window's maps (~10 ms at 2000 × 1500) are then built
+    once. Two entries: each holds its window's maps and keeps ``ref`` alive (keyed by
+    identity)."""
     grid_raw = roi_grid(roi)
     d_max = int(np.ceil(ref.f_px * abs(ref.baseline_m) / cfg.z_min_m)) + 2
     big = _expanded(roi, cfg.expand, rig.wide.size)
     wide_box = _expanded(roi, max(cfg.coarse_expand, cfg.expand), rig.wide.size)
     margin = max(d_max, -cfg.far_disparity_px) + 12
-    opts = RectifyOptions(roi=wide_box, margin_px=margin, grid_step_px=cfg.map_step_px)
+    opts = RectifyOptions(roi=wide_box, margin_px=margin, grid_step_px=cfg.map_step_px,
+                          tele_row_shift_px=float(row_offset_px))
     win = Rectification.from_rig(rig, mode, opts)
     # the tele's maps on the helper thread while this one places the boxes (measure_roi's
     # tele source is queued behind them there; the wide's maps are built on this thread)
@@ -246,6 +256,7 @@ def measure_roi(
     mode: str | None = None,
     wt_scale: bool = True,
     radial: RadialResidualFix | None = None,
+    row_offset_px: float = 0.0,
 ) -> RoiMeasurement:
     """Disparity of the surface in a raw-wide ROI (Fig. 4-2's measuring blocks).
 
@@ -268,6 +279,13 @@ def measure_roi(
     radial : RadialResidualFix, optional
         A learned residual radial distortion (§3.2, :mod:`~phonestereo.fixes.radial_residual`)
         taken out of the matches' d and e before the W-T scale is fitted.
+    row_offset_px : float
+        The row error e the calibration is known to have here (a learned one), px: the coarse
+        step's ±``coarse_rows`` are searched about it (whole pixels). When the coarse peak lies
+        on the border of those rows the rows are searched again about it, up to
+        :data:`MAX_ROW_OFFSET_PX` from 0 (a factory rectification warm-up moves by more than
+        ``coarse_rows``: random-3056's rows were off by 11–12 px and no capture was measured).
+        The matches' e are reported in the reference frame (the offset added back).
 
     Returns
     -------
@@ -288,7 +306,27 @@ def measure_roi(
     if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > w_img or y + h > h_img:
         raise InputError(f"ROI {list(roi)} is not inside the {w_img}×{h_img} wide image")
     roi = (x, y, w, h)
-    g = _window(rig, mode, ref, roi, cfg)
+    rows = round(float(row_offset_px)) if np.isfinite(row_offset_px) else 0
+    tried = {rows}
+    m = _measure(rig, image_wide, image_tele, roi, cfg, ref, mode, wt_scale, radial, rows)
+    while True:
+        e0 = m.counts.get("coarse_e_px", rows) - rows  # the coarse peak's row in its window
+        nxt = rows + e0
+        if abs(e0) < cfg.coarse_rows or abs(nxt) > MAX_ROW_OFFSET_PX or nxt in tried:
+            return m
+        tried.add(nxt)
+        again = _measure(rig, image_wide, image_tele, roi, cfg, ref, mode, wt_scale, radial, nxt)
+        if m.ok and not again.ok:  # the border peak was measured: the wider rows found no better
+            return m
+        m, rows = again, nxt
+
+
+def _measure(
+    rig: Rig, image_wide: Any, image_tele: Any, roi: tuple[int, int, int, int], cfg: RoiConfig,
+    ref: Rectification, mode: str, wt_scale: bool, radial: RadialResidualFix | None, rows: int,
+) -> RoiMeasurement:
+    """:func:`measure_roi` of a checked ROI with the tele's rows moved by ``rows`` px."""
+    g = _window(rig, mode, ref, roi, cfg, rows)
     win, shift, d_max, box, cboxes, c_tele = g.win, g.shift, g.d_max, g.box, g.cboxes, g.c_tele
     grid = g.grid.copy()
     counts: dict[str, int] = {}
@@ -299,7 +337,8 @@ def measure_roi(
         return _fail(g.reason, grid, counts)
     pending = background(win.source, "tele", image_tele)
     source_wide = win.source("wide", image_wide)
-    center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1])) if wt_scale else None
+    # the tele's principal point in the window's tele (its rows moved by `rows`)
+    center = (float(c_tele[0] - shift[0]), float(c_tele[1] - shift[1] + rows)) if wt_scale else None
     # the left's coarse part here while the helper still blurs the tele (coarse_lazy)
     lazy = coarse_lazy((source_wide, pending), box, d_max, cfg, cboxes[0], image_tele)
     sources = (source_wide, pending.result())
@@ -315,9 +354,12 @@ def measure_roi(
         counts["coarse_context_dropped"] = 1
     d0, e0, rt = ch.peak.d, ch.peak.e, ch.right
     counts.update(ch.counts())
+    if np.isfinite(e0):  # in the reference frame
+        counts["coarse_e_px"] = int(e0) + rows
+    if rows:
+        counts["row_offset_px"] = rows
     if ch.reason:
         return _fail(ch.reason, grid, counts)
-    counts["coarse_e_px"] = int(e0)
     if two_pass:
         lw, rt = fine_window(sources, lw, rt, box, d0, e0, ch.scale, center, cfg, ahead)
     slo, shi = g.box_small.min(0), g.box_small.max(0)
@@ -351,7 +393,7 @@ def measure_roi(
         return _fail(
             f"{len(idx)} matches on the majority surface (< {cfg.min_matches})", grid, counts
         )
-    xy_all, d_all, e_all = res.xy + shift, res.d, res.e
+    xy_all, d_all, e_all = res.xy + shift, res.d, res.e + rows
     if radial is not None:
         d_all, e_all = correct_matches(radial, xy_all, d_all, e_all)
     xy = xy_all[idx]
