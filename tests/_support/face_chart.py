@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from phonestereo.sim.module import load_module
@@ -16,3 +17,13 @@ def write_face_chart_set(folder: Path, *, attempts: int = 1, seed: int = 5) -> P
     plan = plan_scenario("learning", load_module("folded-x3"), seed=seed, config=cfg)
     write_capture_set(folder, plan)
     return folder
+
+
+def tele_principal_point_off(folder: Path, axis: int, delta_px: float, name: str) -> Path:
+    """A copy of the set's calibration, named ``name`` beside ``folder``, whose tele principal
+    point is ``delta_px`` off along ``axis`` (0: c_x, 1: c_y); returns its path."""
+    cal = json.loads((folder / "calibration.json").read_text())
+    cal["tele"]["K"][axis][2] += delta_px
+    path = folder.parent / name
+    path.write_text(json.dumps(cal))
+    return path

@@ -6,14 +6,13 @@ calibration is; the learning run tries the faces-gated captures again about it."
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from _support.face_chart import write_face_chart_set
+from _support.face_chart import tele_principal_point_off, write_face_chart_set
 from phonestereo.flows import learning
 from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.face_backends import CachedBackend, default_backend
@@ -79,11 +78,7 @@ def offset_set(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The 1.5 m face-chart capture with a calibration whose tele cy is 40 px off: it reads the
     disparities ~13 px low (the learned correction +9.97 px instead of −3.20 px)."""
     folder = write_face_chart_set(tmp_path_factory.mktemp("offset_set"))
-    cal = json.loads(load_capture_set(folder).calibration_path().read_text())
-    cal["tele"]["K"][1][2] -= 40.0
-    path = folder.parent / "calibration_off.json"
-    path.write_text(json.dumps(cal))
-    return folder, path
+    return folder, tele_principal_point_off(folder, 1, -40.0, "calibration_off.json")
 
 
 def test_a_face_outside_the_gate_is_measured_about_the_known_offset(

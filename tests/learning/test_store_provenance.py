@@ -81,7 +81,7 @@ def test_store_written_by_old_main_is_migrated(tmp_path: Path) -> None:
     path = tmp_path / "fixes.sqlite"
     shutil.copy(FIXTURE_V2, path)
     with FixStore(path) as st:
-        assert st.schema_version == SCHEMA_VERSION == 5
+        assert st.schema_version == SCHEMA_VERSION == 6
         assert st.backup_path == tmp_path / "fixes.sqlite.v2.bak"
         s = st.stats()
         # every row the old code wrote is kept: 3 captures (one empty), 5 + 4 observations
@@ -96,6 +96,8 @@ def test_store_written_by_old_main_is_migrated(tmp_path: Path) -> None:
         assert st.observations(context_id=1).shape == (9,)
         # the radial shift the old code took out was not recorded: NaN, left as learned
         assert np.isnan(st.observations(context_id=1)["radial_px"]).all()
+        # nor the row error each was measured with (schema 6): NaN, no row centring from them
+        assert np.isnan(st.observations(context_id=1)["e_measured_px"]).all()
         # learning beside them needs a new context: their calibration is unknown
         with pytest.raises(ContextError, match=r"before contexts were recorded.*--new-context"):
             st.context_for_learning(CTX)

@@ -33,7 +33,7 @@ from phonestereo.fixes.breathing import correct_depth, focus_sigma_rel
 from phonestereo.flows.config import Corrector, FlowConfig
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
-from phonestereo.flows.roi_config import reaching
+from phonestereo.flows.roi_config import centred_rows, reaching
 from phonestereo.flows.roi_disparity import measure_roi, reference_rectification
 from phonestereo.io import Calibration, CaptureEntry
 from phonestereo.learning.learn import capture_orientation
@@ -142,11 +142,15 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
     radial = inputs.corrector.radial if inputs.corrector is not None else None
     if radial is not None:  # §3.2, learned (fixes/radial_residual.py)
         stages["radial_residual"] = radial.to_dict()
-    roi_cfg = config.roi
+    roi_cfg, rows = config.roi, 0
     if config.learned_correction and inputs.corrector is not None:
         # A far point reads d = −correction: a positive one takes it beyond the searched
         # −2 px (random-3004: +7.5 px, every chart from 3.2 m gated "beyond infinity").
         roi_cfg = reaching(roi_cfg, inputs.corrector.typical_px(orientation))
+        # The rows are searched about the learned row error: random-3056's were off by 12 px,
+        # and about e = 0 its far chessboards settled on an alias 30–37 px off at e ≈ 3.
+        centre = ref.points_wide(np.array([[box[0] + 0.5 * box[2], box[1] + 0.5 * box[3]]]))[0]
+        rows = centred_rows(roi_cfg, inputs.corrector.row_error_px(orientation, centre))
     m = measure_roi(
         rig,
         inputs.image_wide,
@@ -157,6 +161,7 @@ def run(config: FlowConfig, inputs: ApplicationInputs) -> DepthResult:
         mode=config.mode,
         wt_scale=config.wt_scale,
         radial=radial,
+        row_offset_px=rows,
     )
     stages["measure"] = {"counts": m.counts, "ok": m.ok, "reason": m.reason}
     if m.wt is not None:

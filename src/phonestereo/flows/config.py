@@ -26,6 +26,7 @@ from phonestereo.learning.observation import (
     Correction,
     as_observation_array,
     typical_correction_px,
+    typical_row_error_px,
 )
 
 #: Lookup strategies: the smooth field (default, beyond the thesis) and Figure 3-31's.
@@ -335,6 +336,14 @@ class Corrector:
         ob = self.observations
         return typical_correction_px(ob[ob["orientation"] == self.bucket(orientation)]
                                      if ob.size else ob)
+
+    def row_error_px(self, orientation: str, at: Any = None) -> float:
+        """The bucket's :func:`~phonestereo.learning.observation.typical_row_error_px` at the
+        reference rectified wide pixel ``at`` (x, y) (NaN when its observations did not record
+        e)."""
+        ob = self.observations
+        return typical_row_error_px(ob[ob["orientation"] == self.bucket(orientation)]
+                                    if ob.size else ob, at)
 
     def correct(
         self, query: Any, orientation: str, temperature_c: float | None = None,

@@ -38,7 +38,7 @@ from phonestereo.flows.face_backends import CachedBackend, PairBackend, default_
 from phonestereo.flows.face_wt import settle, start_wt
 from phonestereo.flows.focus_stack import FocusCorrection, focus_calibration
 from phonestereo.flows.gates import Gate, capture_gates, first_failed
-from phonestereo.flows.roi_config import reaching
+from phonestereo.flows.roi_config import centred_rows, reaching
 from phonestereo.flows.roi_disparity import RoiMeasurement, reference_rectification
 from phonestereo.geometry import Rig
 from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
@@ -212,18 +212,25 @@ def _learn(
     """:func:`learn_face_capture` after its gates: landmarks, landmark disparity, then the W-T
     scale from ``measure()`` (None: the tele's view is not inside the wide image)."""
     mode = ipd or IpdMode.chart()
-    res = learn_capture(
-        cs,
-        entry.id,
-        rect,
-        ipd_m=mode.ipd_m,
-        source=mode.source,
-        depth_mode="chart" if mode.kind == "chart" else "face",
-        chart_pitch_m=mode.pitch_m,
-        backend=backend,
-        images=imgs,
-        d_offset_px=d_offset_px,
-    )
+
+    def faces(r: Rectification) -> Any:
+        return learn_capture(
+            cs, entry.id, r, ipd_m=mode.ipd_m, source=mode.source,
+            depth_mode="chart" if mode.kind == "chart" else "face", chart_pitch_m=mode.pitch_m,
+            backend=backend, images=imgs, d_offset_px=d_offset_px,
+        )
+
+    res = faces(rect)
+    m: RoiMeasurement | None = None
+    if not res.observations and measure is not None:
+        # Faces are paired and searched over rows about e = 0 (max_e_px): a calibration whose
+        # rows are off by more (random-3056: 11–12 px after warm-up) loses them all. The W-T
+        # measurement's coarse step found the rows; the faces are searched about them.
+        m = measure()
+        rows = centred_rows(config.roi, float(m.counts.get("coarse_e_px", 0))) if m.ok else 0
+        if rows:
+            res = faces(rect.with_tele_rows(rows))
+            stages["row_offset_px"] = rows
     stages["landmarks"] = {"reason": res.reason, "timing_s": res.timing_s,
                            "wide_faces": 0 if res.disparity is None else res.disparity.n_wide}
     obs = res.observations
@@ -235,7 +242,7 @@ def _learn(
         wt = None
         why = "the tele's view is not inside the wide image"
         if measure is not None:
-            m = measure()
+            m = measure() if m is None else m
             wt = m.wt
             why = m.reason or (wt.reason if wt is not None else "")
         stages["wt_scale"] = None if wt is None else wt.to_dict()
@@ -248,6 +255,7 @@ def _learn(
             for o in obs
         )
         if config.radial_residual:  # §3.2: the e of the whole view's matches gives P(r)
+            assert m is not None  # (wt came from it)
             radial = fit_capture_radial(m.xy, m.e, wide_center_px(rect))
             stages["radial_residual"] = None if radial is None else radial.to_dict()
             if radial is not None:

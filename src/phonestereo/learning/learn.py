@@ -175,6 +175,8 @@ def learn_capture(
                 capture_id=entry.id,
                 source=source,
                 sigma_px=f.sigma_d_px,
+                # in the calibration's rectification (rect's tele rows may have been moved)
+                e_measured_px=f.e_px + rect.options.tele_row_shift_px,
             )
         )
     reason = "" if obs else (res.reason or "no face measured")

@@ -48,6 +48,7 @@ NUMERIC_FIELDS = (
     "temperature_c",
     "sigma_px",
     "radial_px",
+    "e_measured_px",
 )
 #: Text columns of an observation array.
 TEXT_FIELDS = ("orientation", "focus_group", "capture_id", "source")
@@ -66,6 +67,7 @@ FIELDS = (
     "source",
     "sigma_px",
     "radial_px",
+    "e_measured_px",
 )
 
 
@@ -111,6 +113,10 @@ class Observation:
     #: learning captures' pooled fit, the one the application takes out of a ROI
     #: (:class:`~phonestereo.flows.config.Corrector`).
     radial_px: float = field(default=math.nan)
+    #: The row error e = y_wide − y_tele measured there, in the reference rectification, pixels;
+    #: NaN when not recorded (stores before schema 6). The application centres its coarse row
+    #: search on the learned captures' typical e (:func:`typical_row_error_px`).
+    e_measured_px: float = field(default=math.nan)
 
     def __post_init__(self) -> None:
         for name in ("x_px", "y_px", "d_measured_px", "d_expected_px", "time_s"):
@@ -129,6 +135,10 @@ class Observation:
         if math.isinf(rad):
             raise InputError(f"observation radial_px must be finite or NaN (none), got {rad}")
         object.__setattr__(self, "radial_px", rad)
+        e = float(self.e_measured_px)
+        if math.isinf(e):
+            raise InputError(f"observation e_measured_px must be finite or NaN (none), got {e}")
+        object.__setattr__(self, "e_measured_px", e)
         if self.focus_group is None:
             object.__setattr__(self, "focus_group", "")
         for name in TEXT_FIELDS:
@@ -223,6 +233,39 @@ def typical_correction_px(obs: Any) -> float:
     c = corrections_px(arr) if arr.size else np.zeros(0)
     c = c[np.isfinite(c)]
     return float(np.median(c)) if c.size else 0.0
+
+
+def typical_row_error_px(obs: Any, at: Any = None) -> float:
+    """The row error ``e_measured_px`` of observations (an array or a sequence of
+    :class:`Observation`) at the rectified wide pixel ``at`` (x, y), px; NaN without any (not
+    recorded). The flows centre their row searches on it.
+
+    e varies across the view: an uncorrected W-T scale s tilts it by (1 − s) per pixel across
+    the baseline and a roll along it (random-3056: e 3 px at the top of the tele's view, 15 px at
+    its bottom). So with ``at`` and at least 6 observations spread over ≥ 50 px both ways, the
+    plane e = a + b·x + c·y fitted to them (least squares, once more without the residuals
+    beyond 3 robust σ) is read there; else their median.
+    """
+    arr = as_observation_array(obs)
+    if not arr.size:
+        return math.nan
+    e = arr["e_measured_px"]
+    ok = np.isfinite(e)
+    if not ok.any():
+        return math.nan
+    xy = np.column_stack([arr["x_px"], arr["y_px"]])[ok]
+    e = e[ok]
+    if at is None or len(e) < 6 or np.ptp(xy, axis=0).min() < 50.0:
+        return float(np.median(e))
+    c = xy.mean(axis=0)
+    a = np.column_stack([np.ones(len(e)), xy - c])
+    keep = np.ones(len(e), bool)
+    for _ in range(2):  # fit, then refit without the outliers (a mispaired face)
+        beta = np.linalg.lstsq(a[keep], e[keep], rcond=None)[0]
+        r = e - a @ beta
+        keep = np.abs(r) <= max(3.0 * 1.4826 * float(np.median(np.abs(r[keep]))), 0.5)
+    q = np.asarray(at, dtype=np.float64).reshape(2) - c
+    return float(beta[0] + beta[1] * q[0] + beta[2] * q[1])
 
 
 def _json_value(v: Any) -> Any:

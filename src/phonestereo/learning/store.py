@@ -21,7 +21,7 @@ Examples
 ...     store.add_capture("f01", [ob])
 ...     store.stats().n_observations, store.schema_version
 1
-(1, 5)
+(1, 6)
 """
 
 from __future__ import annotations

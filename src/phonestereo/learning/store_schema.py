@@ -21,7 +21,7 @@ from phonestereo.errors import StoreError
 T = TypeVar("T")
 
 #: The schema this code writes; older files are migrated on open.
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 #: The first 16 bytes of every SQLite database file.
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -88,6 +88,9 @@ MIGRATIONS: tuple[tuple[str, ...], ...] = (
     (  # 4 → 5: the radial shift each observation's d had taken out (NULL: not recorded)
         "ALTER TABLE observations ADD COLUMN radial_px REAL",
     ),
+    (  # 5 → 6: the row error e each observation was measured with (NULL: not recorded)
+        "ALTER TABLE observations ADD COLUMN e_measured_px REAL",
+    ),
 )
 #: The current schema from nothing (a new file gets it directly, not through every migration:
 #: no dropped tables, compact pages). tests/learning/test_store_migration.py checks that it
@@ -102,6 +105,7 @@ CURRENT_SCHEMA: tuple[str, ...] = (
     *MIGRATIONS[2][-2:],
     *MIGRATIONS[3],
     *MIGRATIONS[4],
+    *MIGRATIONS[5],
 )
 if len(MIGRATIONS) != SCHEMA_VERSION:  # pragma: no cover - a developer error
     raise RuntimeError("store_schema: one migration per schema version is required")
