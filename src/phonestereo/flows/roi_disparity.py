@@ -23,7 +23,6 @@ import numpy as np
 from phonestereo.errors import InputError
 from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
-from phonestereo.features.matching import match_rectified
 from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import correct_matches
 from phonestereo.fixes.wt_scale import WTScale, fit_wt_scale
@@ -31,7 +30,7 @@ from phonestereo.flows.band_gate import band_reason, band_split, on_row
 from phonestereo.flows.blur_equalise import equalise_blur
 from phonestereo.flows.coarse_gate import coarse_peak
 from phonestereo.flows.roi_config import RoiConfig
-from phonestereo.flows.roi_plane import PlaneFit, fit_plane, follow_plane, majority
+from phonestereo.flows.roi_plane import PlaneFit, fit_plane, majority, match_majority
 from phonestereo.flows.roi_window import (
     FineAhead,
     coarse_lazy,
@@ -209,42 +208,6 @@ def _window(
     return _Window(win, frozen(shift), d_max, grid, box_small, box, tuple(cboxes), c_tele)
 
 
-def _match_majority(
-    left: Any,
-    right: Any,
-    box: tuple[int, int, int, int],
-    d0: float,
-    e0: float,
-    slo: F64,
-    shi: F64,
-    cfg: RoiConfig,
-) -> tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]]:
-    """Fine matching around the coarse disparity, then majority → expansion → majority."""
-    counts: dict[str, int] = {}
-    mcfg = cfg.match
-    if abs(e0) + 2 > mcfg.row_tolerance:  # a calibration off across the baseline (refocus)
-        mcfg = replace(mcfg, row_tolerance=int(abs(e0)) + 2)
-    lo_d = int(np.floor(d0)) - cfg.fine_range_px
-    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
-    res = match_rectified(left, right, max_disparity=hi_d, min_disparity=lo_d, roi=box,
-                          config=mcfg)
-    counts["matches"] = len(res.d)
-    in_roi = np.all((res.xy >= slo) & (res.xy <= shi), axis=1)
-    counts["in_roi"] = int(in_roi.sum())
-    empty = np.zeros(0, np.int64)
-    if counts["in_roi"] < 3:
-        return res, in_roi, empty, float("nan"), counts
-    kw = {"bin_px": cfg.majority_bin_px, "tol_px": cfg.majority_tol_px,
-          "tol_rel": cfg.majority_tol_rel}
-    m1, _ = majority(res.d[in_roi], **kw)
-    tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
-    keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
-    m2, sel = majority(res.d[keep], **kw)
-    idx = follow_plane(res.xy, res.d, res.sigma_d, np.flatnonzero(keep)[sel], tol)
-    counts["majority"] = len(idx)
-    return res, in_roi, idx, m2, counts
-
-
 def measure_roi(
     rig: Rig,
     image_wide: Any,
@@ -374,7 +337,7 @@ def _measure(
     for a, b, blur in variants:
         # Blur equalisation first; the unblurred pair when it leaves few matches (it can
         # help or hurt the window fits; the one with more matches on the surface is kept).
-        res, in_roi, idx, m2, sub = _match_majority(a, b, box, d0, e0, slo, shi, cfg)
+        res, in_roi, idx, m2, sub = match_majority(a, b, box, d0, e0, slo, shi, cfg)
         sub["blur_added_x100"] = round(100 * blur)
         if found is None or len(idx) > len(found[2]):
             found = (res, in_roi, idx, m2, sub)

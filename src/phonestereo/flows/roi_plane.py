@@ -1,15 +1,17 @@
-"""The ROI's surface: the majority disparity, the matches along its plane, and the
-disparity surface fitted to them with its σ (thesis §4.1.3; used by
-:func:`~phonestereo.flows.roi_disparity.measure_roi`)."""
+"""The ROI's surface: the fine matches about the coarse disparity, their majority disparity,
+the matches along its plane, and the disparity surface fitted to them with its σ (thesis
+§4.1.3; used by :func:`~phonestereo.flows.roi_disparity.measure_roi`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from phonestereo.features.matching import match_rectified
+from phonestereo.flows.roi_config import RoiConfig
 from phonestereo.geometry.checks import Array
 
 F64 = Array
@@ -188,4 +190,46 @@ def follow_plane(xy: F64, d: F64, sigma: F64, idx: np.ndarray, tol: float,
     return idx
 
 
-__all__ = ["CURVED_MIN_MATCHES", "PlaneFit", "fit_plane", "follow_plane", "majority"]
+
+
+def match_majority(
+    left: Any,
+    right: Any,
+    box: tuple[int, int, int, int],
+    d0: float,
+    e0: float,
+    slo: F64,
+    shi: F64,
+    cfg: RoiConfig,
+) -> tuple[Any, np.ndarray, np.ndarray, float, dict[str, int]]:
+    """Fine matching around the coarse disparity (d0, e0), then majority → expansion → majority
+    (Fig. 4-2): (matches, in the ROI's small box ``slo``…``shi`` (N,) bool, the surface's match
+    indices, the final majority disparity, counts)."""
+    counts: dict[str, int] = {}
+    mcfg = cfg.match
+    if abs(e0) + 2 > mcfg.row_tolerance:  # a calibration off across the baseline (refocus)
+        mcfg = replace(mcfg, row_tolerance=int(abs(e0)) + 2)
+    lo_d = int(np.floor(d0)) - cfg.fine_range_px
+    hi_d = int(np.ceil(d0)) + cfg.fine_range_px
+    res = match_rectified(left, right, max_disparity=hi_d, min_disparity=lo_d, roi=box,
+                          config=mcfg)
+    counts["matches"] = len(res.d)
+    in_roi = np.all((res.xy >= slo) & (res.xy <= shi), axis=1)
+    counts["in_roi"] = int(in_roi.sum())
+    empty = np.zeros(0, np.int64)
+    if counts["in_roi"] < 3:
+        return res, in_roi, empty, float("nan"), counts
+    kw = {"bin_px": cfg.majority_bin_px, "tol_px": cfg.majority_tol_px,
+          "tol_rel": cfg.majority_tol_rel}
+    m1, _ = majority(res.d[in_roi], **kw)
+    tol = max(cfg.majority_tol_px, cfg.majority_tol_rel * abs(m1))
+    keep = np.abs(res.d - m1) <= 3 * tol  # expanded ROI: matches on the majority surface
+    m2, sel = majority(res.d[keep], **kw)
+    idx = follow_plane(res.xy, res.d, res.sigma_d, np.flatnonzero(keep)[sel], tol)
+    counts["majority"] = len(idx)
+    return res, in_roi, idx, m2, counts
+
+
+__all__ = [
+    "CURVED_MIN_MATCHES", "PlaneFit", "fit_plane", "follow_plane", "majority", "match_majority",
+]

@@ -237,9 +237,9 @@ def fine_window(
     the left's and the tele's :func:`fine_core`, whose pixels are taken, not resampled again).
 
     The part is the matcher's crop (:func:`~phonestereo.features.match_input.crop_box` of the
-    box for the fine disparities d0 ± ``fine_range_px`` and the row band ``_match_majority``
-    uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the blur equalisation read is
-    then the one a whole-window Lanczos-4 remap gives.
+    box for the fine disparities d0 ± ``fine_range_px`` and the row band that
+    ``roi_plane.match_majority`` uses) plus ``_FINE_GUARD_PX``: every pixel the matcher and the
+    blur equalisation read is then the one a whole-window Lanczos-4 remap gives.
     """
     H, W = lw.shape[:2]
     x0, y0, x1, y1 = part_w = part_t = fine_part(box, d0, e0, cfg, (W, H))
