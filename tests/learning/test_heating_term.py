@@ -196,3 +196,58 @@ def test_a_slope_the_capture_order_can_fake_is_not_applied_below_3_sigma() -> No
     assert not term.ok and "needs 3σ" in term.reason, term.reason
     assert term.offset_px(35.09)[0] == 0.0
     assert HeatingTerm.fit(_faces()).ok
+
+
+def _warm_order_faces(order_px: float, t_first: float, rise: float) -> list[Observation]:
+    """Faces at 1, 2, 3 m, five placements per distance taken in the same order in every layer
+    while the module warms by ``rise`` °C over the set from ``t_first`` °C; no heating drift at
+    all, only an error of ``order_px``·(placement − 2) that follows the order; 0.02 px noise."""
+    rng = np.random.default_rng(0)
+    obs = []
+    for g in range(15):
+        z, t = (1.0, 2.0, 3.0)[g // 5], 300.0 + 11.5 * g
+        temp = t_first + rise * (1 - np.exp(-(t - 300.0) / 120.0))
+        for _ in range(8):
+            d_true = 18 / z * rng.uniform(0.97, 1.03)
+            x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
+            c = 0.3 - 0.05 * d_true + order_px * (g % 5 - 2)
+            obs.append(Observation(x, y, d_true - c + rng.normal(0, 0.02), d_true, z,
+                                   "landscape", "", t, temp, f"c{g}"))
+    return obs
+
+
+def test_a_slope_the_module_cannot_have_drifted_since_its_calibration_is_not_applied() -> None:
+    """A warm module (33.65 °C, 0.1 °C over the set) whose placement-order error (±0.02 px)
+    passes for a slope at well over 3σ (random-3072 read −6.2 ± 1.4 px/°C, 4.4σ, and every
+    depth +1.0 %): taken back to its calibration's 25 °C that slope would leave a correction of
+    tens of px there, beyond 30 % of the faces' disparity, so the term is refused with the
+    reason — but only a calibration that says its temperature lets the fit tell."""
+    obs = _warm_order_faces(0.02, 33.65, 0.1)
+    blind = HeatingTerm.fit(obs)
+    assert blind.ok and abs(blind.slope_px_per_c) > 3 * blind.slope_sigma > 0
+    told = HeatingTerm.fit(obs, calibration_temperature_c=25.0)
+    assert not told.ok and "not the heating" in told.reason and "25 °C" in told.reason
+    assert told.offset_px(33.8)[0] == 0.0
+    corr = Corrector(obs, FlowConfig(), calibration_temperature_c=25.0)
+    assert not corr.heating.ok and corr.heating.reason == told.reason
+
+
+def test_a_real_drift_since_the_calibration_is_still_applied() -> None:
+    """Learned cold (27–30 °C, 25 °C at the factory) with a real drift of K px/°C since the
+    calibration and a small non-thermal correction (0.3 − 0.05·d px): the correction the slope
+    implies at 25 °C is that small one, so the term is applied as without the check."""
+    rng = np.random.default_rng(3)
+    obs = []
+    for g in range(15):
+        z, t = (1.0, 2.0, 3.0)[g // 5], 60.0 + 11.5 * g
+        temp = 25.0 + 6.0 * (1 - np.exp(-t / 120.0))
+        for _ in range(8):
+            d_true = 18 / z * rng.uniform(0.97, 1.03)
+            x, y = rng.uniform(200, 1800), rng.uniform(200, 1300)
+            c = 0.3 - 0.05 * d_true + K_PX_PER_C * (temp - 25.0)
+            obs.append(Observation(x, y, d_true - c + rng.normal(0, 0.02), d_true, z,
+                                   "landscape", "", t, temp, f"c{g}"))
+    told = HeatingTerm.fit(obs, calibration_temperature_c=25.0)
+    assert told.ok, told.reason
+    assert abs(told.slope_px_per_c - K_PX_PER_C) <= 3 * told.slope_sigma
+    assert told == HeatingTerm.fit(obs)

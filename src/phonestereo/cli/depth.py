@@ -79,7 +79,11 @@ def depth(
             radial = radial_fits(fs, -1 if choice.id is None else choice.id)
         if choice.warning:
             console.print(f"[yellow]warning:[/yellow] {escape(choice.warning)}")
-        corrector = Corrector(obs, cfg, radial_fits=radial) if len(obs) else None
+        corrector = (
+            Corrector(obs, cfg, radial_fits=radial,
+                      calibration_temperature_c=cal.conditions.temperature_c)
+            if len(obs) else None
+        )
         entries = [c for c in cs.captures() if c.kind != "face"]
         if capture is not None:
             entries = [cs.get(capture)]

@@ -126,7 +126,11 @@ def learn_and_apply(
     radial = (
         radial_fits(store, lr.context_id) if store is not None else [c.radial for c in lr.captures]
     )
-    corrector = Corrector(obs, config, radial_fits=radial) if len(obs) else None
+    corrector = (
+        Corrector(obs, config, radial_fits=radial,
+                  calibration_temperature_c=cal.conditions.temperature_c)
+        if len(obs) else None
+    )
     res = apply_all(
         config, cs, corrector,
         progress=None if progress is None else (lambda k, n: progress("application", k, n)),
@@ -218,9 +222,12 @@ def run_bench(
         rows_l = []
         for name in LOOKUPS:
             cfg_l = replace(cfg, lookup=name)
-            res_l = apply_all(
-                cfg_l, cs, Corrector(obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures])
+            corr_l = Corrector(
+                obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures],
+                calibration_temperature_c=load_calibration(
+                    cs.calibration_path()).conditions.temperature_c,
             )
+            res_l = apply_all(cfg_l, cs, corr_l)
             sc = _score(_rows(cs, res_l))
             rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],
                            "gated": sc["gated"]})

@@ -226,12 +226,16 @@ class Corrector:
 
     Wraps :class:`~phonestereo.learning.field.FieldLookup` or
     :class:`~phonestereo.learning.lookup.DictionaryLookup`; with orientation buckets off all
-    observations share one bucket.
+    observations share one bucket. ``calibration_temperature_c`` (the calibration's
+    conditions, °C, when known) lets the heating term refuse a slope the module could not
+    have drifted by since then
+    (:data:`~phonestereo.learning.heating_term.MAX_CALIBRATION_CORRECTION_REL`).
     """
 
     def __init__(
         self, observations: Any, config: FlowConfig, principal_point_px: Any = None,
         radial_fits: Sequence[RadialResidualFix | None] = (),
+        calibration_temperature_c: float | None = None,
     ) -> None:
         #: The learning captures' residual radial distortion pooled (``radial_residual``), or None.
         self.radial = pool_radial(radial_fits) if config.radial_residual else None
@@ -241,7 +245,8 @@ class Corrector:
         self.heating = HeatingTerm(False, "off (heating_by_temperature)")
         self.heating_time = HeatingTerm(False, "off (heating_by_temperature)", index="time_s")
         if config.heating_by_temperature and config.learned_correction:
-            self.heating = HeatingTerm.fit(obs)
+            self.heating = HeatingTerm.fit(
+                obs, calibration_temperature_c=calibration_temperature_c)
             obs = self.heating.normalise(obs)  # referred to one temperature
             if not self.heating.ok:  # no temperatures: the drift still to come is a σ
                 self.heating_time = HeatingTerm.fit(obs, index="time_s",

@@ -90,6 +90,16 @@ SIGNIFICANCE = 2.0
 #: random-1002 +0.57 ± 0.23 (2.4σ; 0.24 / 0.54 % with it, 0.20 / 0.34 % without)
 #: (docs/module-random.md, session 17).
 APPLY_SIGNIFICANCE = 3.0
+#: A temperature slope is not applied when the correction it implies at the calibration's own
+#: temperature, c̄ − k·(T_ref − T_cal) (the drift linear in temperature since the factory taken
+#: back out), exceeds this fraction of the learned faces' expected disparity: at T_cal the
+#: factory calibration holds but for the non-thermal effects, and those together make the
+#: thesis's whole naive error, ~30 % (§1). random-3072, warm (0.11 °C over the set), read
+#: −6.2 ± 1.4 px/°C, 4.4σ across its captures — 54 px of drift since its calibration 8.7 °C
+#: cooler, for a learned correction of −1.7 px; applied, every depth read +1.0 % (0 % within σ),
+#: without it 0.44 % (94 %): its placements, taken in the same order in every distance layer as
+#: the module warmed, carry errors that pass for a slope (docs/module-random.md, session 23).
+MAX_CALIBRATION_CORRECTION_REL = 0.3
 
 
 @dataclass(frozen=True)
@@ -132,10 +142,12 @@ class HeatingTerm:
     @classmethod
     def fit(
         cls, observations: Any, *, min_captures: int = MIN_CAPTURES, index: str = "temperature_c",
-        tau_s: float = 70.0,
+        tau_s: float = 70.0, calibration_temperature_c: float | None = None,
     ) -> HeatingTerm:
         """Fit the term to learned observations (one bucket or all; module docstring), by
-        ``index`` "temperature_c" (a correction) or "time_s" (a σ only, see ``index``)."""
+        ``index`` "temperature_c" (a correction) or "time_s" (a σ only, see ``index``). With the
+        calibration's temperature (°C) a slope must also be plausible from there
+        (:data:`MAX_CALIBRATION_CORRECTION_REL`)."""
         obs = as_observation_array(observations)
         if obs.size == 0:
             return cls(False, "no observations", index=index)
@@ -185,12 +197,23 @@ class HeatingTerm:
         need = APPLY_SIGNIFICANCE if index == "temperature_c" else SIGNIFICANCE
         significant = abs(k) > need * k_sigma
         applied = significant and index == "temperature_c"
+        why = (f"no significant drift over the learning captures' {index}: "
+               f"{k:.3g} ± {k_sigma:.2g} px per unit (needs {need:g}σ)")
+        if applied and calibration_temperature_c is not None and np.isfinite(
+                calibration_temperature_c):
+            c_cal = float(np.median(c_i[use])) - k * (ref - float(calibration_temperature_c))
+            bound = MAX_CALIBRATION_CORRECTION_REL * float(np.median(mean(obs["d_expected_px"])))
+            if abs(c_cal) > bound:
+                applied = significant = False
+                why = (f"the drift over the learning captures' temperatures, {k:.3g} ± "
+                       f"{k_sigma:.2g} px/°C, is not the heating: from the calibration's "
+                       f"{calibration_temperature_c:.3g} °C it would leave a correction of "
+                       f"{c_cal:.3g} px there, beyond {bound:.3g} px "
+                       f"({MAX_CALIBRATION_CORRECTION_REL:.0%} of the faces' disparity)")
         g_sigma = float(sd[1]) if applied else _averaged_gain_sigma(x[use], c_i[use])
         if not significant:
-            return cls(False, f"no significant drift over the learning captures' {index}: "
-                       f"{k:.3g} ± {k_sigma:.2g} px per unit (needs {need:g}σ)", k, k_sigma,
-                       ref, (lo, hi),
-                       int(use.sum()), index, tau_s, g_sigma)
+            return cls(False, why, k, k_sigma, ref, (lo, hi), int(use.sum()), index, tau_s,
+                       g_sigma)
         return cls(True, "", k, k_sigma, ref, (lo, hi), int(use.sum()), index, tau_s, g_sigma)
 
     def offset_px(self, temperature_c: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -263,5 +286,6 @@ def _ols(x: np.ndarray, y: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray]:
 
 
 __all__ = [
-    "APPLY_SIGNIFICANCE", "MIN_CAPTURES", "MIN_SPAN_C", "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm",
+    "APPLY_SIGNIFICANCE", "MAX_CALIBRATION_CORRECTION_REL", "MIN_CAPTURES", "MIN_SPAN_C",
+    "MIN_SPAN_S", "SIGNIFICANCE", "HeatingTerm",
 ]
