@@ -5,6 +5,7 @@ a confident wrong number"; random-1013's ×4.2 periscope read a chart at 2.40 m 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -231,3 +232,45 @@ def test_a_wt_scale_below_the_prescale_drift_is_corrected_once_the_uncorrected_b
     assert ch.reason == "" and abs(ch.peak.d - 10.0) < 0.3 and abs(ch.scale - 1.03) < 0.003
     # without the tele's centre (no W-T scale in the flow) the box stays gated, saying why
     assert "does not correlate" in coarse_peak(left, right, [box], 64, cfg).reason
+
+
+def test_an_ambiguous_scale_corrected_box_is_not_decided_by_the_uncorrected_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """random-3073's ×3.1 periscope at 2.8 m (a 2.1 % W-T scale): with the scale the tiles
+    show corrected, the chessboard's truth and an alias correlate 0.970 and 0.962 (ambiguous);
+    the uncorrected pair, which that scale decorrelates, then chose an alias 82 px off at 0.570
+    over the truth at 0.519 (tile t 3.5) and the chart read 0.47 m for 2.80 m, at 1598σ. The
+    corrected pair's verdict now stands whenever it correlated better than the uncorrected
+    choice; a choice the uncorrected pair makes better than the corrected one is still taken."""
+    import phonestereo.flows.coarse_gate as cg
+    from phonestereo.flows.coarse import CoarsePeak
+
+    rng = np.random.default_rng(1)
+    left = _chessboard(600, 700, 26.5, 4.0) + rng.normal(0, 2, (600, 700)).astype(np.float32)
+    right = _tele(_chessboard(600, 700, 26.5, 4.0), 10.0, 1.03, rng)
+    cfg = RoiConfig()
+    real = cg._first_usable
+    calls: list[str] = []
+
+    def uncorrected_picks(peak: float) -> Any:
+        def first_usable(lw: Any, rt: Any, boxes: Any, d_max: int, c: RoiConfig,
+                         first: Any = None, maps: Any = None, before: Any = None) -> Any:
+            if rt is right:  # the uncorrected pair: an alias wins by chance
+                calls.append("uncorrected")
+                return boxes[0], CoarsePeak(63.0, peak, 0.0, 0.55, 10.0, 0.0), None, ""
+            calls.append("corrected")
+            return real(lw, rt, boxes, d_max, c, first, maps, before)
+        return first_usable
+
+    monkeypatch.setattr(cg, "_first_usable", uncorrected_picks(0.57))
+    ch = coarse_peak(left, right, [BOX], 64, cfg, center=(200.0, 300.0))
+    # the 3 % scale pre-scales the tele (7.5 px at the box's edges); corrected, the alias one
+    # period away is as good as the truth: the capture is gated, saying so
+    assert calls == ["corrected", "uncorrected"]
+    assert "ambiguous" in ch.reason and "W-T scale" in ch.reason, ch.reason
+    # an uncorrected choice that correlates better than the corrected pair did is kept
+    calls.clear()
+    monkeypatch.setattr(cg, "_first_usable", uncorrected_picks(1.0))  # corrected: 0.999
+    ch = coarse_peak(left, right, [BOX], 64, cfg, center=(200.0, 300.0))
+    assert ch.reason == "" and ch.peak.d == 63.0

@@ -203,9 +203,9 @@ def coarse_peak(
     scalable = center is not None and tz >= cfg.coarse_min_zncc and np.isfinite(s) and s != 1.0
     prescale = scalable and drift > cfg.coarse_max_scale_drift_px
 
-    def scaled() -> tuple[CoarseChoice | None, str]:
+    def scaled() -> tuple[CoarseChoice | None, str, float]:
         """The boxes on the tele window with the tiles' W-T scale corrected: the choice, or
-        None and why not."""
+        None, why not and the peak ZNCC of the box that said so."""
         assert center is not None
         if on_prescale is not None:
             on_prescale(s)
@@ -224,16 +224,24 @@ def coarse_peak(
             rt_s = rescale_tele(rt, s, center)
         cbox, cp, pc, why = _first_usable(lw, rt_s, boxes, d_max, cfg, before=fill)
         if not why:
-            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz), ""
-        return None, f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show corrected)"
+            return CoarseChoice(cbox, cp, pc, "", rt_s, s, tz), "", cp.peak
+        return None, (f"{why} (with the W-T scale {s:.3f} that the ROI's tiles show "
+                      "corrected)"), cp.peak
 
-    why_s = ""
+    why_s, peak_s = "", float("nan")
     if prescale:
-        choice, why_s = scaled()
+        choice, why_s, peak_s = scaled()
         if choice is not None:
             return choice
     cbox, cp, pc, why = _first_usable(lw, rt, boxes, d_max, cfg, p0, maps[0] if maps else None,
                                       before=None if cover is None else cover.cover_box)
+    if not why and prescale and cp.peak < peak_s and peak_s >= cfg.coarse_min_zncc:
+        # The scale-corrected pair correlated better and could not choose (an alias as good
+        # as the truth): the uncorrected pair's choice, made where the scale decorrelates the
+        # box, is chance. random-3073's ×3.1 periscope (W-T scale 2.1 %) at 2.8 m: corrected,
+        # the truth 0.970 against an alias 0.962 (ambiguous); uncorrected, an alias 82 px off
+        # won 0.570 to 0.519 (tile t 3.5) and the chart read 0.47 m, 1598σ.
+        return CoarseChoice(cbox, cp, pc, why_s, rt, tile_zncc=tz)
     if not why:
         return CoarseChoice(cbox, cp, pc, "", rt, tile_zncc=tz)
     if scalable and not prescale:
@@ -243,7 +251,7 @@ def coarse_peak(
         # its chessboard's whole-box ZNCC fell from 0.93 at 0.9 m to 0.58 at 4 m (tiles 0.91),
         # the true peak no longer beating an alias. Tried only once the uncorrected pair has
         # failed, so a capture measured without it is measured as before.
-        choice, why_s = scaled()
+        choice, why_s, _ = scaled()
         if choice is not None:
             return choice
         why_s = ""  # the uncorrected pair's reason stands
