@@ -15,21 +15,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from phonestereo.evaluation.bench import run_bench
-from phonestereo.evaluation.module_bench import demo_quick_config
-from phonestereo.sim.random_module import load_ranges, random_module
-from phonestereo.sim.scenarios import plan_scenario
-from phonestereo.sim.writer import write_capture_set
+from _support.drawn_module import bench_drawn_module
 
 
 @pytest.mark.slow  # ~3 min on one core: 33 captures rendered, learned and applied
 def test_a_warm_module_does_not_learn_a_heating_slope_from_its_capture_order(tmp_path) -> None:
-    seed = 3072
-    plan = plan_scenario("thesis-bench", random_module(seed, load_ranges()), seed,
-                         config=demo_quick_config())
-    out = tmp_path / "set"
-    write_capture_set(out, plan, workers=1)
-    res = run_bench(out)
+    res = bench_drawn_module(3072, tmp_path)
     caps = [c for c in res["captures"] if c["ok"]]
     assert len(caps) >= 0.8 * len(res["captures"]), [c["reason"] for c in res["captures"]]
     err = np.array([c["depth_m"] / c["z_true_m"] - 1 for c in caps])
