@@ -25,7 +25,8 @@ The flows therefore, when ``FlowConfig.radial_residual`` is on:
   matches (:func:`fit_capture_radial`) and correct that capture's face disparities by −δ_x;
 - in the application, correct the ROI's matches (d and e) by the fit pooled over the learning
   captures (:func:`pool_radial`: the median curve) before the ROI's own W-T scale is fitted
-  (:func:`correct_matches`).
+  (:func:`correct_matches`), and refer the learned faces to that same pooled fit
+  (:func:`refer_to_pooled_radial`).
 
 Beyond the largest learned radius P is held at its value there (a polynomial is not
 extrapolated).
@@ -155,6 +156,31 @@ def correct_matches(fix: RadialResidualFix, xy: Any, d: Any, e: Any) -> tuple[An
     return dv, ev
 
 
+def refer_to_pooled_radial(obs: np.ndarray, pooled: RadialResidualFix | None) -> np.ndarray:
+    """Observations whose disparity had their own capture's radial fit taken out (finite
+    ``radial_px``) with the pooled fit's taken out instead (thesis §3.2), in place.
+
+    The application takes the pooled fit out of a ROI, so the faces must carry the same one:
+    one capture's cubic, fitted to the e of its 100–700 matches, moved its faces by up to
+    0.23 px, and the learned correction carried that to every chart. Over the 28 bench sets
+    the sets' mean errors' rms falls 0.386 → 0.304 % (random modules) and 0.232 → 0.180 %
+    (``folded-x3`` 0–7); random-1004 +1.07 → +0.14 % (docs/module-random.md, session 14).
+    Observations without ``radial_px`` (stores before schema 5) are left as learned.
+    ``obs`` is a structured observation array
+    (:func:`~phonestereo.learning.observation.as_observation_array`).
+    """
+    if pooled is None or obs.size == 0:
+        return obs
+    own = obs["radial_px"]
+    ok = np.isfinite(own)
+    if ok.any():
+        q = np.column_stack([obs["x_px"][ok], obs["y_px"][ok]])
+        new = radial_shift(pooled, q)[:, 0]
+        obs["d_measured_px"][ok] += own[ok] - new
+        obs["radial_px"][ok] = new
+    return obs
+
+
 def radial_from_dict(data: dict[str, Any]) -> RadialResidualFix:
     """The inverse of :meth:`RadialResidualFix.to_dict` (the fix store keeps it as JSON)."""
     return RadialResidualFix(
@@ -173,5 +199,6 @@ __all__ = [
     "pool_radial",
     "radial_from_dict",
     "radial_shift",
+    "refer_to_pooled_radial",
     "wide_center_px",
 ]

@@ -16,7 +16,7 @@ from scipy.stats import chi2
 
 from phonestereo.errors import InputError
 from phonestereo.fixes.distortion import RadialResidualFix
-from phonestereo.fixes.radial_residual import pool_radial, radial_shift
+from phonestereo.fixes.radial_residual import pool_radial, refer_to_pooled_radial
 from phonestereo.flows.roi_disparity import RoiConfig
 from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
@@ -196,29 +196,6 @@ def _narrow(obs: np.ndarray) -> bool:
         return True
     lo, hi = np.percentile(obs["d_measured_px"], [5, 95])
     return bool(hi - lo < 0.25 * abs(float(np.median(obs["d_measured_px"]))))
-
-
-def refer_to_pooled_radial(obs: np.ndarray, pooled: RadialResidualFix | None) -> np.ndarray:
-    """Observations whose disparity had their own capture's radial fit taken out (finite
-    ``radial_px``) with the pooled fit's taken out instead (thesis §3.2), in place.
-
-    The application takes the pooled fit out of a ROI, so the faces must carry the same one:
-    one capture's cubic, fitted to the e of its 100–700 matches, moved its faces by up to
-    0.23 px, and the learned correction carried that to every chart. Over the 28 bench sets
-    the sets' mean errors' rms falls 0.386 → 0.304 % (random modules) and 0.232 → 0.180 %
-    (``folded-x3`` 0–7); random-1004 +1.07 → +0.14 % (docs/module-random.md, session 14).
-    Observations without ``radial_px`` (stores before schema 5) are left as learned.
-    """
-    if pooled is None or obs.size == 0:
-        return obs
-    own = obs["radial_px"]
-    ok = np.isfinite(own)
-    if ok.any():
-        q = np.column_stack([obs["x_px"][ok], obs["y_px"][ok]])
-        new = radial_shift(pooled, q)[:, 0]
-        obs["d_measured_px"][ok] += own[ok] - new
-        obs["radial_px"][ok] = new
-    return obs
 
 
 class Corrector:
