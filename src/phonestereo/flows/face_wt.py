@@ -23,7 +23,8 @@ from typing import Any
 
 from phonestereo.features._threads import ahead, split_enabled
 from phonestereo.flows.config import FlowConfig
-from phonestereo.flows.roi_disparity import RoiMeasurement, measure_roi, tele_view_box
+from phonestereo.flows.roi_disparity import RoiMeasurement, measure_roi
+from phonestereo.flows.view_box import tele_view_box
 from phonestereo.geometry import Rig
 from phonestereo.rectification import Rectification
 
@@ -34,7 +35,7 @@ Box = tuple[int, int, int, int]
 
 def wt_box(ref: Rectification) -> Box | None:
     """The raw-wide box (x, y, w, h) of the face captures' W-T scale fit: everything the tele
-    sees (:func:`~phonestereo.flows.roi_disparity.tele_view_box`, inside the wide image);
+    sees (:func:`~phonestereo.flows.view_box.tele_view_box`, inside the wide image);
     None when that is less than 32 px high or wide.
 
     The scale is read from e across the disparity axis, so its error is the matches' e error

@@ -94,22 +94,6 @@ def _expanded(roi: tuple[int, int, int, int], factor: float, size: tuple[int, in
     return (x0, y0, x1 - x0, y1 - y0)
 
 
-def tele_view_box(ref: Rectification, margin_px: int = 40) -> tuple[int, int, int, int]:
-    """The raw-wide box the tele sees (the reference window unrectified), shrunk by a margin."""
-    w, h = ref.wide_rect.size
-    edge = np.concatenate([
-        np.column_stack([np.linspace(0, w - 1, 32), np.zeros(32)]),
-        np.column_stack([np.linspace(0, w - 1, 32), np.full(32, h - 1.0)]),
-        np.column_stack([np.zeros(32), np.linspace(0, h - 1, 32)]),
-        np.column_stack([np.full(32, w - 1.0), np.linspace(0, h - 1, 32)]),
-    ])
-    raw = ref.unrectify_wide(edge)
-    raw = raw[np.isfinite(raw).all(axis=1)]
-    lo = np.maximum(raw.min(axis=0) + margin_px, 0)
-    hi = np.minimum(raw.max(axis=0) - margin_px, np.array(ref.rig.wide.size) - 1)
-    return int(lo[0]), int(lo[1]), int(max(hi[0] - lo[0], 0)), int(max(hi[1] - lo[1], 0))
-
-
 def roi_grid(roi: tuple[int, int, int, int], n: int = 9) -> F64:
     """An n × n grid of raw wide pixels over the ROI (x, y, w, h), (n², 2)."""
     x, y, w, h = roi
@@ -400,5 +384,4 @@ __all__ = [
     "measure_roi",
     "reference_rectification",
     "roi_grid",
-    "tele_view_box",
 ]

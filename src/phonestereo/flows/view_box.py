@@ -3,7 +3,8 @@
 A diagonal baseline turns the canonical rectified frame by ~45°, and a ×5 tele sees less than
 an expanded ROI: the bounding box of a raw box then holds pixels the tele never saw (black after
 the remap), which decorrelate the whole-box correlation. :func:`inscribed_box` shrinks it into
-the raw box's outline and the tele's view over the searched disparities.
+the raw box's outline and the tele's view over the searched disparities; :func:`tele_view_box`
+is the raw-wide box the whole tele view covers (the face captures' W-T measurement).
 """
 
 from __future__ import annotations
@@ -130,4 +131,25 @@ def _outline_grid(lo: F64, hi: F64, n: int = 9) -> F64:
     return np.column_stack([gx.ravel(), gy.ravel()])
 
 
-__all__ = ["inscribed_box", "outline", "tele_outline"]
+def tele_view_box(ref: Rectification, margin_px: int = 40) -> tuple[int, int, int, int]:
+    """The raw-wide box the tele sees (the reference window unrectified), shrunk by a margin."""
+    w, h = ref.wide_rect.size
+    edge = np.concatenate([
+        np.column_stack([np.linspace(0, w - 1, 32), np.zeros(32)]),
+        np.column_stack([np.linspace(0, w - 1, 32), np.full(32, h - 1.0)]),
+        np.column_stack([np.zeros(32), np.linspace(0, h - 1, 32)]),
+        np.column_stack([np.full(32, w - 1.0), np.linspace(0, h - 1, 32)]),
+    ])
+    raw = ref.unrectify_wide(edge)
+    raw = raw[np.isfinite(raw).all(axis=1)]
+    lo = np.maximum(raw.min(axis=0) + margin_px, 0)
+    hi = np.minimum(raw.max(axis=0) - margin_px, np.array(ref.rig.wide.size) - 1)
+    return int(lo[0]), int(lo[1]), int(max(hi[0] - lo[0], 0)), int(max(hi[1] - lo[1], 0))
+
+
+__all__ = [
+    "inscribed_box",
+    "outline",
+    "tele_outline",
+    "tele_view_box",
+]
