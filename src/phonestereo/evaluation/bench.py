@@ -220,13 +220,11 @@ def run_bench(
     obs_all = [o for c in lr.captures for o in c.observations]
     if lookups and obs_all:
         rows_l = []
+        t_cal = load_calibration(cs.calibration_path()).conditions.temperature_c
         for name in LOOKUPS:
             cfg_l = replace(cfg, lookup=name)
-            corr_l = Corrector(
-                obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures],
-                calibration_temperature_c=load_calibration(
-                    cs.calibration_path()).conditions.temperature_c,
-            )
+            corr_l = Corrector(obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures],
+                               calibration_temperature_c=t_cal)
             res_l = apply_all(cfg_l, cs, corr_l)
             sc = _score(_rows(cs, res_l))
             rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],

@@ -190,8 +190,6 @@ def follow_plane(xy: F64, d: F64, sigma: F64, idx: np.ndarray, tol: float,
     return idx
 
 
-
-
 def match_majority(
     left: Any,
     right: Any,
