@@ -117,8 +117,8 @@ def run_flags(set_dir: str, flags: str) -> dict[str, Any]:
             mock.patch.object(application, "measure_roi", measure_in_application)
         )
         lr = learning.run(cfg, cs, cal, None)
-        corr = Corrector([o for c in lr.captures for o in c.observations], cfg,
-                         radial_fits=[c.radial for c in lr.captures])
+        corr = Corrector.for_calibration([o for c in lr.captures for o in c.observations], cfg,
+                                         cal, radial_fits=[c.radial for c in lr.captures])
         err, z_score, rows = [], [], []
         ver = [c for c in cs.captures() if c.kind == "verification"]
         focus = learning.stack_corrections(cfg, cs, ver, cal)  # as evaluate's apply_all does

@@ -583,7 +583,7 @@ def run(set_dir: Path | None, repeat: int, size: tuple[int, int] | None = None,
         cs = load_capture_set(set_dir)
         cal = load_calibration(cs.calibration_path())
         learn, obs = bench_learning(cs, cal)
-        corrector = Corrector(obs, FlowConfig()) if obs else None
+        corrector = Corrector.for_calibration(obs, FlowConfig(), cal) if obs else None
         app = bench_application(cs, cal, corrector, repeat)
     finally:
         if tmp is not None:

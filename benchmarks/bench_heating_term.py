@@ -40,7 +40,7 @@ def run(set_dir: str) -> dict[str, Any]:
     out: dict[str, Any] = {"set": set_dir, "observations": len(obs), "variants": {}}
     for name, vc in (("heating_by_temperature", cfg),
                      ("without", replace(cfg, heating_by_temperature=False))):
-        corr = Corrector(obs, vc)
+        corr = Corrector.for_calibration(obs, vc, cal)
         rows = []
         for r in apply_all(vc, cs, corr):
             z_true = gt.capture(r.capture_id).roi_depth_m

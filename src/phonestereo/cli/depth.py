@@ -80,8 +80,7 @@ def depth(
         if choice.warning:
             console.print(f"[yellow]warning:[/yellow] {escape(choice.warning)}")
         corrector = (
-            Corrector(obs, cfg, radial_fits=radial,
-                      calibration_temperature_c=cal.conditions.temperature_c)
+            Corrector.for_calibration(obs, cfg, cal, radial_fits=radial)
             if len(obs) else None
         )
         entries = [c for c in cs.captures() if c.kind != "face"]

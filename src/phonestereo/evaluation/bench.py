@@ -127,8 +127,7 @@ def learn_and_apply(
         radial_fits(store, lr.context_id) if store is not None else [c.radial for c in lr.captures]
     )
     corrector = (
-        Corrector(obs, config, radial_fits=radial,
-                  calibration_temperature_c=cal.conditions.temperature_c)
+        Corrector.for_calibration(obs, config, cal, radial_fits=radial)
         if len(obs) else None
     )
     res = apply_all(
@@ -220,11 +219,11 @@ def run_bench(
     obs_all = [o for c in lr.captures for o in c.observations]
     if lookups and obs_all:
         rows_l = []
-        t_cal = load_calibration(cs.calibration_path()).conditions.temperature_c
+        cal_l = load_calibration(cs.calibration_path())
         for name in LOOKUPS:
             cfg_l = replace(cfg, lookup=name)
-            corr_l = Corrector(obs_all, cfg_l, radial_fits=[c.radial for c in lr.captures],
-                               calibration_temperature_c=t_cal)
+            corr_l = Corrector.for_calibration(obs_all, cfg_l, cal_l,
+                                               radial_fits=[c.radial for c in lr.captures])
             res_l = apply_all(cfg_l, cs, corr_l)
             sc = _score(_rows(cs, res_l))
             rows_l.append({"lookup": name, **sc["full"], "within_sigma": sc["within_sigma"],

@@ -34,6 +34,7 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -43,6 +44,7 @@ from scipy.optimize import least_squares
 from phonestereo.errors import InputError
 from phonestereo.learning.lookup import as_queries
 from phonestereo.learning.observation import Correction, as_observation_array, corrections_px
+from phonestereo.learning.wt_lever import lever_weights
 
 _MAD = 1.4826  # MAD → σ for a normal distribution
 
@@ -233,15 +235,16 @@ def _folds(groups: np.ndarray, n: int, k: int, seed: int) -> np.ndarray:
 
 
 def _cross_validate(
-    frame: _Frame,
-    q: np.ndarray,
+    design: Callable[[int, int], np.ndarray],
     c: np.ndarray,
     groups: np.ndarray,
     cfg: FieldConfig,
     f: float,
 ) -> list[CVScore]:
-    """Held-out clipped squared residuals of every feasible model; the one-standard-error
-    comparison is paired (same points, per capture), so shared noise cancels."""
+    """Held-out clipped squared residuals of every feasible model (``design(deg_o, deg_g)``:
+    its weighted design matrix over the observations, ``c`` the weighted corrections); the
+    one-standard-error comparison is paired (same points, per capture), so shared noise
+    cancels."""
     fold = _folds(groups, len(c), cfg.folds, cfg.seed)
     k = int(fold.max()) + 1
     n_train = min(int((fold != i).sum()) for i in range(k))
@@ -252,7 +255,7 @@ def _cross_validate(
             p = _n_params(deg_o, deg_g)
             if 3 * p > n_train:
                 continue
-            A = frame.design(q, deg_o, deg_g)
+            A = design(deg_o, deg_g)
             r2 = np.empty_like(c)
             for i in range(k):
                 tr, te = fold != i, fold == i
@@ -279,6 +282,8 @@ def fit_field(
     observations: Any,
     principal_point_px: tuple[float, float] | None = None,
     config: FieldConfig | None = None,
+    *,
+    tele_center_x_px: float | None = None,
 ) -> FieldFit:
     """Fit the smooth correction field to learned observations (one orientation bucket).
 
@@ -289,12 +294,17 @@ def fit_field(
     principal_point_px : (float, float) or None
         Centre of the sensor polynomials; None = the centre of the learned positions.
     config : FieldConfig
+    tele_center_x_px : float, optional
+        x of the tele's principal point in the observations' rectified frame, px: the fit is
+        then weighted by the W-T scale's lever arm (:mod:`~phonestereo.learning.wt_lever`);
+        None fits every observation alike.
 
     Returns
     -------
     FieldFit
         ``field`` with the chosen degrees, CV scores and σ; or None with a reason when there
-        are no observations.
+        are no observations. ``scatter_px`` is then the weighted residuals' (one observation
+        of median weight).
     """
     cfg = config or FieldConfig()
     obs = as_observation_array(observations)
@@ -307,30 +317,40 @@ def fit_field(
     s = max(float(np.max(np.abs(q[:, :2] - [cx, cy]))), 1.0)
     d_scale = float(np.std(q[:, 2]))
     frame = _Frame(cx, cy, s, float(np.mean(q[:, 2])), d_scale if d_scale > 1e-6 else 1.0)
+    groups = _groups(obs)
+    w = np.ones(len(c))
+    if tele_center_x_px is not None:  # x_t = x_w − d: the lever of the capture's W-T scale
+        lever = q[:, 0] - q[:, 2] - float(tele_center_x_px)
+        w = lever_weights(c, lever, groups, obs["sigma_px"])
+    c = c * w
+
+    def design(deg_o: int, deg_g: int) -> np.ndarray:
+        return frame.design(q, deg_o, deg_g) * w[:, None]
+
     f = cfg.f_scale_px
     if f is None:
         resid = c - np.median(c)  # robust scale about the median, or about the richest model
         if 3 * _n_params(cfg.max_degree, cfg.max_degree) <= len(c):
-            A = frame.design(q, cfg.max_degree, cfg.max_degree)
+            A = design(cfg.max_degree, cfg.max_degree)
             resid = c - A @ np.linalg.lstsq(A, c, rcond=None)[0]
         # floor 1 mpx: finer corrections are meaningless and a zero scale stalls the solver
         f = 1.5 * max(_MAD * float(np.median(np.abs(resid - np.median(resid)))), 1e-3)
     enough = len(obs) >= 2 * cfg.folds
-    cv = _cross_validate(frame, q, c, _groups(obs), cfg, f) if enough else []
+    cv = _cross_validate(design, c, groups, cfg, f) if enough else []
     if cv:  # the simplest model within one (paired) standard error of the best
         allowed = [t for t in cv if t.degree_gain >= cfg.min_degree_gain]
         chosen = next((t for t in allowed if t.excess_px2 <= t.se_excess_px2), allowed[0])
         deg_o, deg_g = chosen.degree_offset, chosen.degree_gain
     else:
         deg_o, deg_g = 0, min(cfg.min_degree_gain, 0) if len(c) >= 3 else -1
-    A = frame.design(q, deg_o, deg_g)
-    coef, w = _robust_fit(A, c, cfg.loss, f)
+    A = design(deg_o, deg_g)
+    coef, rw = _robust_fit(A, c, cfg.loss, f)
     r = c - A @ coef
     scatter = _MAD * float(np.median(np.abs(r - np.median(r))))
     if len(c) == 1:
         sig = float(obs["sigma_px"][0])
         scatter = sig if np.isfinite(sig) else float("nan")
-    cov = np.linalg.pinv(A.T @ (w[:, None] * A)) * scatter**2
+    cov = np.linalg.pinv(A.T @ (rw[:, None] * A)) * scatter**2
     return FieldFit(
         SmoothField(
             degree_offset=deg_o,
@@ -356,13 +376,15 @@ class FieldLookup:
         config: FieldConfig | None = None,
         *,
         narrow_gain: bool = False,
+        tele_center_x_px: float | None = None,
     ) -> None:
         obs = as_observation_array(observations)
         cfg = config or FieldConfig()
         if narrow_gain:  # too narrow a disparity span to fit a gain: offsets only
             cfg = replace(cfg, min_degree_gain=-1, max_gain_degree=-1)
         self.fits = {
-            str(o): fit_field(obs[obs["orientation"] == o], principal_point_px, cfg)
+            str(o): fit_field(obs[obs["orientation"] == o], principal_point_px, cfg,
+                              tele_center_x_px=tele_center_x_px)
             for o in np.unique(obs["orientation"])
         }
 

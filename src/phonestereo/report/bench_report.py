@@ -87,8 +87,7 @@ def correction_figure(
         return None
     cal = load_calibration(load_capture_set(capture_set).calibration_path())
     ref = reference_rectification(cal.rig, config.mode)
-    corr = Corrector(observations, config,
-                     calibration_temperature_c=cal.conditions.temperature_c)
+    corr = Corrector.for_calibration(observations, config, cal)
     obs = corr.observations
     d = float(np.median(obs["d_measured_px"])) if d_px is None else d_px
     w, h = ref.wide_rect.size
