@@ -20,3 +20,15 @@ def bench_drawn_module(seed: int, folder: Path) -> dict[str, Any]:
     out = folder / "set"
     write_capture_set(out, plan, workers=1)
     return run_bench(out)
+
+
+def scored_drawn_module(seed: int, folder: Path) -> tuple[Any, Any]:
+    """(relative depth errors, |error| / σ) of the measured captures of :func:`bench_drawn_module`,
+    each shape (n,); asserts that ≥ 80 % of the captures were measured (issue #18's line)."""
+    import numpy as np
+
+    res = bench_drawn_module(seed, folder)
+    caps = [c for c in res["captures"] if c["ok"]]
+    assert len(caps) >= 0.8 * len(res["captures"]), [c["reason"] for c in res["captures"]]
+    err = np.array([c["depth_m"] / c["z_true_m"] - 1 for c in caps])
+    return err, np.abs(err) / np.array([c["sigma_m"] / c["z_true_m"] for c in caps])
