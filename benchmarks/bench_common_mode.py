@@ -42,7 +42,8 @@ import phonestereo.flows.learning as learning
 from phonestereo.fixes.radial_residual import radial_shift
 from phonestereo.fixes.wt_scale import WTScale
 from phonestereo.flows import application
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.roi_disparity import fit_plane, reference_rectification
 from phonestereo.geometry import Transform
 from phonestereo.io import load_calibration, load_capture_set, read_gray

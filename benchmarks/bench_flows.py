@@ -49,7 +49,8 @@ from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.flows import application, roi_disparity
 from phonestereo.flows import learning as learning_flow
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.face_backends import PairBackend
 from phonestereo.flows.learning import (
     CachedBackend,
@@ -83,7 +84,7 @@ BLOCKS = (
     ("  fit_plane", "flows/roi_plane.py", "fit_plane"),
     ("  refine_lk", "features/subpixel.py", "refine_lk"),
     ("reference_rectification", "flows/roi_disparity.py", "reference_rectification"),
-    ("Corrector.correct", "flows/config.py", "correct"),
+    ("Corrector.correct", "flows/corrector.py", "correct"),
     ("capture_gates", "flows/gates.py", "capture_gates"),
     ("  LensModel._field (valid radius, per new lens)", "geometry/lens.py", "_field"),
 )

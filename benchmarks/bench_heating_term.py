@@ -2,7 +2,7 @@
 without ``FlowConfig.heating_by_temperature`` (issue #18 items 3 and 4).
 
 The set is learned once (the learning flow does not depend on the switch); each variant then
-builds its :class:`~phonestereo.flows.config.Corrector` from the same observations and runs
+builds its :class:`~phonestereo.flows.corrector.Corrector` from the same observations and runs
 the application flow on every verification capture. Per capture: the relative error against
 the ground truth, σ, |error|/σ and the σ parts of the correction (px); per variant: full-flow
 median and p90 |relative error|, within-σ, captures measured, the largest |error|/σ and the
@@ -23,7 +23,8 @@ import numpy as np
 
 from phonestereo.evaluation.bench import apply_all
 from phonestereo.flows import learning
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.learning import default_backend
 from phonestereo.io import load_calibration, load_capture_set
 from phonestereo.sim.ground_truth import GROUND_TRUTH_NAME, load_ground_truth

@@ -10,7 +10,8 @@ from phonestereo.fixes.focus import ScaleOffset
 from phonestereo.fixes.radial_residual import fit_capture_radial, pool_radial, radial_shift
 from phonestereo.flows import application
 from phonestereo.flows.coarse import coarse_disparity
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import capture_gates, first_failed
 from phonestereo.flows.roi_disparity import fit_plane, majority, measure_roi

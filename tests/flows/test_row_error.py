@@ -17,7 +17,8 @@ import pytest
 
 from _support.face_chart import tele_principal_point_off, write_face_chart_set
 from phonestereo.flows import learning
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.face_backends import CachedBackend, default_backend
 from phonestereo.flows.face_wt import measure_wt, wt_box
 from phonestereo.flows.roi_config import RoiConfig, centred_rows

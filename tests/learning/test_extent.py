@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.learning.extent import FOCAL_REL_SIGMA, LearnedExtent, distance_layers
 from phonestereo.learning.observation import Observation
 

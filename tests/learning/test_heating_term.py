@@ -7,7 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.learning.heating_term import HeatingTerm
 from phonestereo.learning.observation import Observation
 

@@ -21,8 +21,8 @@ from phonestereo.evaluation.analyses._common import json_clean as clean
 from phonestereo.evaluation.bench import run_bench
 from phonestereo.features.match_input import parse_roi
 from phonestereo.flows import application
-from phonestereo.flows.config import Corrector
 from phonestereo.flows.config_file import load_flow_config
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.learning import stack_corrections, store_context
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray

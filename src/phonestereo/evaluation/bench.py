@@ -30,7 +30,8 @@ from phonestereo.errors import InputError
 from phonestereo.evaluation.summary import score_capture_set
 from phonestereo.features.landmarks import LandmarkBackend
 from phonestereo.flows import application, learning
-from phonestereo.flows.config import FIXES, LOOKUPS, Corrector, FlowConfig
+from phonestereo.flows.config import FIXES, LOOKUPS, FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.learning import CachedBackend, default_backend, stack_corrections
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray

@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 
 from phonestereo.fixes.breathing import correct_depth, focus_sigma_rel
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.focus_stack import FocusCorrection
 from phonestereo.flows.gates import Gate, capture_gates, first_failed, learned_gate
 from phonestereo.flows.roi_config import centred_rows, reaching

@@ -1,4 +1,5 @@
-"""Configuration of the Phase 0 flows (thesis chapter 4) and the learned-correction lookup.
+"""Configuration of the Phase 0 flows (thesis chapter 4) and of the learned correction
+(:class:`~phonestereo.flows.corrector.Corrector` applies it).
 
 One :class:`FlowConfig` drives the learning and the application phase alike, so that what was
 learned is applied under the same conventions. Every chapter-3 fix has a switch (the ablation
@@ -157,8 +158,4 @@ APPLY_ONLY = (
 )
 
 
-# The Corrector lives in flows/corrector.py (it needs FlowConfig only as a type); re-exported
-# here, where callers have always found it.
-from phonestereo.flows.corrector import ALL_BUCKETS, Corrector  # noqa: E402
-
-__all__ = ["ALL_BUCKETS", "APPLY_ONLY", "FIXES", "LOOKUPS", "Corrector", "FlowConfig"]
+__all__ = ["APPLY_ONLY", "FIXES", "LOOKUPS", "FlowConfig"]

@@ -7,13 +7,14 @@ and σ with its common-mode and extrapolation parts. Constructed by the applicat
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
 
 from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import pool_radial, refer_to_pooled_radial
+from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.learning.extent import LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
@@ -25,9 +26,6 @@ from phonestereo.learning.observation import (
     typical_correction_px,
     typical_row_error_px,
 )
-
-if TYPE_CHECKING:
-    from phonestereo.flows.config import FlowConfig
 
 ALL_BUCKETS = "all"
 

@@ -111,7 +111,7 @@ class Observation:
     #: ``d_measured_px`` with its own capture's fit, pixels; NaN when none was taken out or it
     #: was not recorded (stores before schema 5). The learned correction re-refers it to the
     #: learning captures' pooled fit, the one the application takes out of a ROI
-    #: (:class:`~phonestereo.flows.config.Corrector`).
+    #: (:class:`~phonestereo.flows.corrector.Corrector`).
     radial_px: float = field(default=math.nan)
     #: The row error e = y_wide − y_tele measured there, in the reference rectification, pixels;
     #: NaN when not recorded (stores before schema 6). The application centres its coarse row

@@ -19,8 +19,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from phonestereo.flows.config import Corrector, FlowConfig
+from phonestereo.flows.config import FlowConfig
 from phonestereo.flows.config_file import flow_config_from_dict
+from phonestereo.flows.corrector import Corrector
 from phonestereo.flows.roi_disparity import reference_rectification
 from phonestereo.io import load_calibration, load_capture_set, read_gray
 
