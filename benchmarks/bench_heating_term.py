@@ -41,7 +41,7 @@ def run(set_dir: str) -> dict[str, Any]:
     out: dict[str, Any] = {"set": set_dir, "observations": len(obs), "variants": {}}
     for name, vc in (("heating_by_temperature", cfg),
                      ("without", replace(cfg, heating_by_temperature=False))):
-        corr = Corrector.for_calibration(obs, vc, cal)
+        corr = Corrector(obs, vc)
         rows = []
         for r in apply_all(vc, cs, corr):
             z_true = gt.capture(r.capture_id).roi_depth_m
