@@ -15,7 +15,7 @@ from scipy.stats import chi2
 from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import pool_radial, refer_to_pooled_radial
 from phonestereo.flows.config import FlowConfig
-from phonestereo.flows.roi_disparity import reference_rectification
+from phonestereo.flows.roi_disparity import reference_rectification, tele_center_px
 from phonestereo.learning.extent import LearnedExtent
 from phonestereo.learning.field import FieldConfig, FieldLookup
 from phonestereo.learning.heating_term import HeatingTerm
@@ -116,12 +116,10 @@ class Corrector:
         """The correction of ``observations`` learned under ``calibration`` (a
         :class:`~phonestereo.io.calibration.Calibration`): its temperature and the tele's
         principal point in the reference rectified frame (``config.mode``) passed on."""
-        rig = calibration.rig
-        ref = reference_rectification(rig, config.mode)
-        c_tele = ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0]
+        ref = reference_rectification(calibration.rig, config.mode)
         return cls(observations, config, radial_fits=radial_fits,
                    calibration_temperature_c=calibration.conditions.temperature_c,
-                   tele_center_x_px=float(c_tele[0]))
+                   tele_center_x_px=float(tele_center_px(ref, calibration.rig)[0]))
 
     def _capture_scatter(self) -> float:
         """Capture-to-capture scatter of the learned observations about the correction, px.

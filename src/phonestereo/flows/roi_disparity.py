@@ -57,6 +57,12 @@ def reference_rectification(rig: Rig, mode: str = "canonical") -> Rectification:
     return Rectification.from_rig(rig, mode)
 
 
+def tele_center_px(ref: Rectification, rig: Rig) -> Array:
+    """``rig``'s tele principal point in ``ref``'s rectified frame (2,), px: the centre of the
+    W-T scale (:class:`~phonestereo.fixes.wt_scale.WTScale`)."""
+    return frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])
+
+
 @dataclass(frozen=True)
 class RoiMeasurement:
     """What the ROI blocks measured."""
@@ -169,7 +175,7 @@ def _window(
         win.points_wide(np.concatenate(raw)), np.cumsum([len(r) for r in raw])[:-1]
     )
     grid = frozen(grid_w + shift)
-    c_tele = frozen(ref.points_tele(np.array([[rig.tele.cx, rig.tele.cy]]))[0])
+    c_tele = tele_center_px(ref, rig)
     box_small = frozen(box_small)
     if not (np.isfinite(box_small).all() and np.isfinite(pts).all()):
         why = "the ROI does not map into the rectified view"
@@ -384,4 +390,5 @@ __all__ = [
     "measure_roi",
     "reference_rectification",
     "roi_grid",
+    "tele_center_px",
 ]
