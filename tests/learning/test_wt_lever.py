@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from phonestereo.flows.config import FlowConfig
+from phonestereo.flows.corrector import Corrector
 from phonestereo.learning.field import fit_field
 from phonestereo.learning.observation import Observation
 from phonestereo.learning.wt_lever import lever_noise, lever_weights
@@ -18,7 +20,8 @@ CX = 500.0  # the tele's principal point, rectified x
 LEVERS = (-320.0, -110.0, 90.0, 300.0)
 
 
-def _faces(seed: int, tau: float = 1.5e-3, s0: float = 0.03) -> list[Observation]:
+def _faces(seed: int, tau: float = 1.5e-3, s0: float = 0.03,
+           levers: tuple[float, ...] = LEVERS) -> list[Observation]:
     """12 captures of 4 faces at 3 distances; c = 0.3 + 0.01·d + δs_k·lever + noise."""
     rng = np.random.default_rng(seed)
     out = []
@@ -26,7 +29,7 @@ def _faces(seed: int, tau: float = 1.5e-3, s0: float = 0.03) -> list[Observation
         d = (12.0, 18.0, 30.0)[k % 3] + rng.normal(0, 0.2)
         ds = rng.normal(0, tau)
         y = rng.uniform(300, 700)
-        for j, lev in enumerate(LEVERS):
+        for j, lev in enumerate(levers):
             x = CX + lev + d + rng.normal(0, 20)
             lever = x - d - CX
             c = 0.3 + 0.01 * d + ds * lever + rng.normal(0, s0)
@@ -78,3 +81,20 @@ def test_weighting_by_the_lever_arm_reads_the_centre_closer() -> None:
     weighted = np.array([_centre_error(_faces(s), True) for s in range(20)])
     rms_u, rms_w = np.sqrt(np.mean(unweighted**2)), np.sqrt(np.mean(weighted**2))
     assert rms_w < 0.67 * rms_u, (rms_u, rms_w)
+
+
+def test_the_captures_spread_loses_what_their_scale_errors_put_in_it() -> None:
+    # faces all on one side of the tele's centre (150–450 px out): each capture's mean carries
+    # δs·l̄ ~ 1.5e-3 · 300 px = 0.45 px of its W-T scale error, which a chart at the centre does
+    # not; the captures have no offset of their own. Over 20 seeds the capture σ's rms falls
+    # from 0.31 to 0.11 px and the common-mode ρ's capture part from 1.6 % to 0.24 % (measured);
+    # asserted: by 2× and 3×
+    before, after = [], []
+    for seed in range(20):
+        obs = _faces(seed, levers=(150.0, 250.0, 350.0, 450.0))
+        for out, cx in ((before, None), (after, CX)):
+            corr = Corrector(obs, FlowConfig(), tele_center_x_px=cx)
+            out.append((corr.capture_sigma_px, corr.extents["landscape"].rho_captures))
+    rms_b, rms_a = (np.sqrt(np.mean(np.square(v), axis=0)) for v in (before, after))
+    assert rms_a[0] < 0.5 * rms_b[0], (rms_b, rms_a)
+    assert rms_a[1] < rms_b[1] / 3, (rms_b, rms_a)

@@ -23,9 +23,11 @@ from phonestereo.learning.lookup import DictionaryLookup
 from phonestereo.learning.observation import (
     Correction,
     as_observation_array,
+    corrections_px,
     typical_correction_px,
     typical_row_error_px,
 )
+from phonestereo.learning.wt_lever import capture_lever_variance, lever_noise
 
 ALL_BUCKETS = "all"
 
@@ -91,6 +93,7 @@ class Corrector:
                                                     tau_s=config.warmup_s / 2.6)
         self.observations = obs
         self.config = config
+        self.tele_center_x_px = tele_center_x_px
         pp: tuple[float, float] | None = None
         if principal_point_px is not None:
             pp = (float(principal_point_px[0]), float(principal_point_px[1]))
@@ -133,23 +136,29 @@ class Corrector:
         zero on 14 of them; docs/module-random.md, session 13). A capture of n faces gives its
         variance on n − 1 degrees of freedom, whose median is only 0.45 (1 dof) to 0.84 (4 dof)
         of the true variance, so each is divided by its χ² median per dof before the median is
-        taken (:func:`_within_variance`); the bench's face captures hold 2–5 faces.
+        taken (:func:`_within_variance`); the bench's face captures hold 2–5 faces. A capture's
+        mean also carries its W-T scale error times its faces' mean lever arm
+        (:meth:`_lever_variance`), which a chart at the tele's centre does not: that is taken
+        out too (random-3095: σ 0.33 → 0.29 %, within σ 94 → 89 %; docs/module-random.md,
+        session 25).
         """
         obs = self.observations
         if obs.size == 0:
             return 0.0
-        means, within, counts = [], [], []
+        means, within, counts, lever_var = [], [], [], []
         for b in np.unique(obs["orientation"]):
             ob = obs[obs["orientation"] == b]
             q = np.column_stack([ob["x_px"], ob["y_px"], ob["d_measured_px"]])
             c = self._raw_correct(q, str(b))
             r = (ob["d_expected_px"] - ob["d_measured_px"]) - c.value_px
-            for cid in np.unique(ob["capture_id"]):
+            lev = self._lever_variance(ob)
+            for k, cid in enumerate(np.unique(ob["capture_id"])):
                 rc = r[ob["capture_id"] == cid]
                 rc = rc[np.isfinite(rc)]
                 if rc.size:
                     means.append(float(np.mean(rc)))
                     counts.append(rc.size)
+                    lever_var.append(float(lev[k]))
                     if rc.size > 1:
                         within.append((float(np.var(rc, ddof=1)), rc.size - 1))
         if len(means) < 4:
@@ -157,7 +166,21 @@ class Corrector:
         m = np.asarray(means)
         between = (1.4826 * float(np.median(np.abs(m - np.median(m))))) ** 2
         noise = _within_variance(within) * float(np.mean(1.0 / np.asarray(counts)))
+        noise += float(np.mean(lever_var))
         return float(np.sqrt(max(between - noise, 0.0)))
+
+    def _lever_variance(self, ob: np.ndarray) -> np.ndarray:
+        """The variance each capture's mean correction owes its W-T scale error (G,) px², in
+        ``np.unique`` order of the capture ids of one bucket's observations ``ob``
+        (:func:`~phonestereo.learning.wt_lever.capture_lever_variance`, τ as the field's
+        weights take it); zeros without the tele's centre."""
+        groups = np.unique(ob["capture_id"], return_inverse=True)[1].ravel()
+        n_g = int(groups.max()) + 1 if groups.size else 0
+        if self.tele_center_x_px is None or not ob.size:
+            return np.zeros(n_g)
+        lever = ob["x_px"] - ob["d_measured_px"] - float(self.tele_center_x_px)
+        tau = lever_noise(corrections_px(ob), lever, groups, ob["sigma_px"])[0]
+        return capture_lever_variance(lever, groups, tau)
 
     def _extent(self, bucket: str) -> LearnedExtent:
         """The learned extent of a bucket, with residuals about this correction."""
@@ -169,6 +192,7 @@ class Corrector:
         return LearnedExtent.from_observations(
             ob, np.nan_to_num(r), focal_rel_sigma=self.config.focal_rel_sigma,
             drift_gain_sigma=max(drift) if drift else float("nan"),
+            lever_var_px2=self._lever_variance(ob),
         )
 
     def _raw_correct(self, query: Any, bucket: str) -> Correction:

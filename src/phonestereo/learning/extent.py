@@ -108,10 +108,15 @@ class LearnedExtent:
         *,
         focal_rel_sigma: float = FOCAL_REL_SIGMA,
         drift_gain_sigma: float = float("nan"),
+        lever_var_px2: Any = None,
     ) -> LearnedExtent:
         """From learned observations (one bucket) and, when given, their residuals about the
-        fitted correction (px; default: about their mean) and the gain's σ with the drift in
-        the fit (px/px, :class:`~phonestereo.learning.heating_term.HeatingTerm`)."""
+        fitted correction (px; default: about their mean), the gain's σ with the drift in
+        the fit (px/px, :class:`~phonestereo.learning.heating_term.HeatingTerm`) and the
+        variance each capture's mean correction owes its W-T scale error (G,) px², in
+        ``np.unique`` order of the capture ids
+        (:func:`~phonestereo.learning.wt_lever.capture_lever_variance`): a chart at the tele's
+        centre does not carry it, so the capture and common-mode spreads lose it."""
         obs = as_observation_array(observations)
         c = corrections_px(obs)
         r = c - np.mean(c) if residual_px is None else np.asarray(residual_px, dtype=np.float64)
@@ -124,8 +129,12 @@ class LearnedExtent:
         mean_rel = np.bincount(cid, r / np.where(d_exp > 0, d_exp, np.nan), g) / n
         mean_c = np.bincount(cid, c, g) / n
         mean_d = np.bincount(cid, d, g) / n
-        cap = _robust_sd(mean_r) if g >= 4 else 0.0
-        rho_c = _robust_sd(mean_rel) if g >= 4 else 0.0
+        lev = np.zeros(g) if lever_var_px2 is None else np.asarray(lever_var_px2, np.float64)
+        mean_dexp = np.bincount(cid, d_exp, g) / n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lev_rel = np.where(mean_dexp > 0, lev / mean_dexp**2, np.nan)
+        cap = _less_noise(_robust_sd(mean_r), lev) if g >= 4 else 0.0
+        rho_c = _less_noise(_robust_sd(mean_rel), lev_rel) if g >= 4 else 0.0
         gain_sigma = _slope_sigma(mean_d, mean_c)
         xy = np.column_stack([obs["x_px"], obs["y_px"]])
         span = np.ptp(xy, axis=0) if len(xy) else np.zeros(2)
@@ -198,6 +207,14 @@ def _robust_sd(v: np.ndarray) -> float:
     if v.size < 2:
         return 0.0
     return float(_MAD * np.median(np.abs(v - np.median(v))))
+
+
+def _less_noise(spread: float, noise_var: np.ndarray) -> float:
+    """A spread less the typical (median) variance its values owe a known noise, floored at 0."""
+    noise = noise_var[np.isfinite(noise_var)]
+    if noise.size == 0 or not noise.any():
+        return spread
+    return float(np.sqrt(max(spread**2 - float(np.median(noise)), 0.0)))
 
 
 def _slope_sigma(x: np.ndarray, y: np.ndarray) -> float:

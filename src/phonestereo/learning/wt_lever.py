@@ -107,4 +107,21 @@ def lever_weights(c: Any, lever_px: Any, groups: Any, sigma_px: Any = None) -> n
     return np.asarray(np.median(sig) / sig)
 
 
-__all__ = ["MIN_CAPTURES", "MIN_DOF", "MIN_SPREAD_PX", "lever_noise", "lever_weights"]
+def capture_lever_variance(lever_px: Any, groups: Any, tau: float) -> np.ndarray:
+    """The variance each capture's mean correction owes its W-T scale error, px², shape (G,)
+    for the G captures of ``groups`` (N,) in ``np.unique`` order: τ²·l̄², l̄ the mean lever arm
+    of the capture's faces (``lever_px`` (N,), px). Its faces share that error, so no number of
+    them averages it out; a chart at the tele's centre (lever 0) does not carry it.
+
+    >>> capture_lever_variance([300.0, 400.0, -50.0, 50.0], [0, 0, 1, 1], 1e-3)
+    array([0.1225, 0.    ])
+    """
+    lev = np.nan_to_num(np.asarray(lever_px, dtype=np.float64).reshape(-1))
+    g = np.unique(np.asarray(groups).reshape(-1), return_inverse=True)[1].ravel()
+    n_g = int(g.max()) + 1 if g.size else 0
+    mean_lever = np.bincount(g, lev, n_g) / np.maximum(np.bincount(g, minlength=n_g), 1)
+    return np.asarray(float(tau) ** 2 * mean_lever**2)
+
+
+__all__ = ["MIN_CAPTURES", "MIN_DOF", "MIN_SPREAD_PX", "capture_lever_variance", "lever_noise",
+           "lever_weights"]
