@@ -45,6 +45,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from phonestereo.blas_threads import single_blas_thread
 from phonestereo.features.landmarks import LandmarkBackend, MediaPipeBackend
 from phonestereo.features.landmarks.base import FaceResult
 from phonestereo.flows import application, roi_disparity
@@ -63,6 +64,8 @@ from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_
 from phonestereo.learning import learn as learn_mod
 from phonestereo.learning.pair_guide import WideToTeleGuide
 from phonestereo.rectification import Rectification, RectifyOptions
+
+single_blas_thread()  # as the CLI runs (phonestereo.blas_threads)
 
 #: Blocks of the application phase reported from the profile: label → function name (file
 #: suffix, function; "a|b": the sum of both) as pstats keys them (the calling thread only: the

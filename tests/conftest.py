@@ -2,6 +2,8 @@
 
 - ``tests/`` is on ``sys.path`` (pytest inserts a rootdir conftest's folder), so tests import
   their shared helpers as ``_support.<module>``.
+- BLAS runs on one thread, as under the CLI (:mod:`phonestereo.blas_threads`): the suite's
+  two workers on two cores would otherwise stall in OpenBLAS's thread pool.
 - Under ``CI=true`` a test skipped because the real third-party data (``../shared/data``) or
   the headless browser (Chromium) is missing fails instead: CI must not stay green without
   the real-data tests or the report's browser test.
@@ -16,6 +18,9 @@ from typing import Any
 import pytest
 
 from _support import SHARED_DATA
+from phonestereo.blas_threads import single_blas_thread
+
+single_blas_thread()
 
 #: Skip reasons that mean "an input CI must have is missing" (the tests' own wording).
 CI_REQUIRED = {

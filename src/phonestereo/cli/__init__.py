@@ -7,11 +7,13 @@ lazily, when their command runs (:class:`phonestereo.cli.app.LazyGroup`), so tha
 
 from __future__ import annotations
 
+from phonestereo.blas_threads import single_blas_thread
 from phonestereo.cli.app import app
 
 __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """Console-script entry point."""
+    """Console-script entry point (BLAS on one thread: :mod:`phonestereo.blas_threads`)."""
+    single_blas_thread()
     app()
