@@ -4,6 +4,8 @@
   their shared helpers as ``_support.<module>``.
 - BLAS runs on one thread, as under the CLI (:mod:`phonestereo.blas_threads`): the suite's
   two workers on two cores would otherwise stall in OpenBLAS's thread pool.
+- The slow tests run longest first (:mod:`_support.slow_order`), so that `make acceptance`'s two
+  workers finish together.
 - Under ``CI=true`` a test skipped because the real third-party data (``../shared/data``) or
   the headless browser (Chromium) is missing fails instead: CI must not stay green without
   the real-data tests or the report's browser test.
@@ -18,6 +20,7 @@ from typing import Any
 import pytest
 
 from _support import SHARED_DATA
+from _support.slow_order import order_slowest_first
 from phonestereo.blas_threads import single_blas_thread
 
 single_blas_thread()
@@ -28,6 +31,10 @@ CI_REQUIRED = {
     "beside the clone (../shared/data)",
     "chromium not installed": "Chromium is missing: apt-get install -y chromium (.ci/run does)",
 }
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    order_slowest_first(items)
 
 
 def ci_enabled() -> bool:

@@ -1,0 +1,46 @@
+"""The slow tests' wall seconds, measured in `make acceptance` on 2 cores (session 25,
+`--durations=0`, setup + call, parameters summed): :func:`order_slowest_first` puts them in that
+order, so that xdist's load scheduling hands the long tests out first, alternately to its two
+workers (longest-processing-time first), instead of leaving one worker to run the last long
+tests alone while the other idles (session 25: 3207 s, ~20 min of it on one worker).
+
+A test missing here counts 0 and keeps its collection order after the listed ones; re-measure
+with ``make acceptance`` (it prints ``--durations=20``) when a slow test is added.
+"""
+
+from __future__ import annotations
+
+from collections.abc import MutableSequence
+from typing import Any
+
+SECONDS = {
+    "test_calib_sim::test_twenty_seeds_every_parameter_within_its_covariance": 1220,
+    "test_false_heating_slope::test_a_warm_module_does_not_learn_a_heating_slope_from_its_capture_order": 811,  # noqa: E501
+    "test_rows_off_module::test_rows_off_by_12_px_are_learned_and_measured": 533,
+    "test_lever_weighted_field::test_faces_far_from_the_tele_centre_do_not_decide_the_chart_correction": 492,  # noqa: E501
+    "test_naive::test_naive_error_breakdown_by_effect": 366,
+    "test_analysis_heating::test_default_scenario": 326,
+    "test_hot_folded_module::test_hot_folded_module_meets_the_random_modules_lines": 259,
+    "test_analysis_wt_scale::test_autofocus_failure_flagged_and_left_out": 155,
+    "test_analysis_handheld::test_default_scenario": 65,
+    "test_verification_sweep::test_sweep_never_mislabels_and_detects_most": 31,
+    "test_analysis_orientation::test_default_scenario": 58,
+    "test_guide::test_every_guide_command_succeeds": 56,
+    "test_analysis_wt_scale::test_refocus_all_effects": 53,
+    "test_analysis_repeatability::test_focus_effects_only": 48,
+    "test_analysis_distortion::test_with_calibration_captures": 43,
+    "test_analysis_heating::test_temperature_reporting_module": 34,
+    "test_analysis_essential::test_default_scenario": 33,
+    "test_sim_render::test_full_size_corner_accuracy_table": 32,
+}
+
+
+def _key(nodeid: str) -> str:
+    """``file stem::function`` of a node id (no folder, no parameters)."""
+    path, _, name = nodeid.split("[", 1)[0].rpartition("::")
+    return f"{path.rsplit('/', 1)[-1].removesuffix('.py')}::{name}"
+
+
+def order_slowest_first(items: MutableSequence[Any]) -> None:
+    """Sort pytest ``items`` in place by their measured seconds, longest first (stable)."""
+    items[:] = sorted(items, key=lambda it: -SECONDS.get(_key(it.nodeid), 0))
