@@ -376,7 +376,7 @@ def _defocus(
     """Each object's visible layer (coverage, premultiplied radiance) and its σ → composite."""
     ys, xs = crossed
     # All sub-samples at once: one bincount per object, not one per refinement part (each of
-    # those allocated and added an array the size of every crossed pixel: 4 s of a 12 MP view).
+    # those allocated and added an array the size of every crossed pixel: 4 s of a 6.5 MP view).
     if parts:
         k_all, i_all, w_all, v_all = (np.concatenate(col) for col in zip(*parts, strict=True))
     else:
