@@ -1,8 +1,10 @@
 """The slow tests' wall seconds, measured in `make acceptance` on 2 cores (session 25,
-`--durations=0`, setup + call, parameters summed): :func:`order_slowest_first` puts them in that
-order, so that xdist's load scheduling hands the long tests out first, alternately to its two
-workers (longest-processing-time first), instead of leaving one worker to run the last long
-tests alone while the other idles (session 25: 3207 s, ~20 min of it on one worker).
+`--durations=0`, setup + call; a parametrised test's figure is one parameter's):
+:func:`order_slowest_first` puts them in that order, so that xdist's load scheduling hands the
+long tests out first, alternately to its two workers (longest-processing-time first), instead of
+leaving one worker to run the last long tests alone while the other idles (session 25: 3207 s,
+~20 min of it on one worker; with this order the tail remained, since xdist pre-queues its first
+dozen tests: docs/module-random.md, session 25).
 
 A test missing here counts 0 and keeps its collection order after the listed ones; re-measure
 with ``make acceptance`` (it prints ``--durations=20``) when a slow test is added.
