@@ -60,12 +60,14 @@ from phonestereo.flows.learning import (
     stack_corrections,
 )
 from phonestereo.flows.roi_disparity import reference_rectification, roi_grid
+from phonestereo.heap import keep_large_arrays_on_the_heap
 from phonestereo.io import CaptureSet, load_calibration, load_capture_set, read_gray
 from phonestereo.learning import learn as learn_mod
 from phonestereo.learning.pair_guide import WideToTeleGuide
 from phonestereo.rectification import Rectification, RectifyOptions
 
-single_blas_thread()  # as the CLI runs (phonestereo.blas_threads)
+single_blas_thread()  # as the CLI runs (phonestereo.blas_threads, phonestereo.heap)
+keep_large_arrays_on_the_heap()
 
 #: Blocks of the application phase reported from the profile: label → function name (file
 #: suffix, function; "a|b": the sum of both) as pstats keys them (the calling thread only: the

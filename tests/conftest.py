@@ -22,8 +22,10 @@ import pytest
 from _support import SHARED_DATA
 from _support.slow_order import order_slowest_first
 from phonestereo.blas_threads import single_blas_thread
+from phonestereo.heap import keep_large_arrays_on_the_heap
 
 single_blas_thread()
+keep_large_arrays_on_the_heap()
 
 #: Skip reasons that mean "an input CI must have is missing" (the tests' own wording).
 CI_REQUIRED = {

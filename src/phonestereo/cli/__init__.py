@@ -9,11 +9,14 @@ from __future__ import annotations
 
 from phonestereo.blas_threads import single_blas_thread
 from phonestereo.cli.app import app
+from phonestereo.heap import keep_large_arrays_on_the_heap
 
 __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """Console-script entry point (BLAS on one thread: :mod:`phonestereo.blas_threads`)."""
+    """Console-script entry point (BLAS on one thread: :mod:`phonestereo.blas_threads`; large
+    arrays on the heap: :mod:`phonestereo.heap`)."""
     single_blas_thread()
+    keep_large_arrays_on_the_heap()
     app()
