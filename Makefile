@@ -6,6 +6,9 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # pytest workers: both cores by default
 JOBS ?= 2
+# xdist hands each worker one test at a time (its default sends the first dozen in one block:
+# with the longest tests first that put the five longest on one worker, tests/_support/slow_order.py).
+XDIST = -n $(JOBS) --maxschedchunk 1
 
 .PHONY: all install demo test lint typecheck imports unit acceptance bench clean
 
@@ -33,7 +36,7 @@ imports: $(STAMP)
 	$(BIN)/lint-imports
 
 unit: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) --durations=10
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) --durations=10
 
 test: lint typecheck imports unit
 
@@ -41,10 +44,10 @@ test: lint typecheck imports unit
 # test); `make test` runs the fast ones. .ci/run runs both, with CI=true (missing real data or
 # Chromium fails instead of skipping).
 acceptance: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) -m 'slow and not bench' -rs --durations=20
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) -m 'slow and not bench' -rs --durations=0
 
 bench: acceptance
-	MPLBACKEND=Agg $(BIN)/pytest -q -n $(JOBS) -m bench -rs || [ $$? -eq 5 ]  # 5: none marked
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) -m bench -rs || [ $$? -eq 5 ]  # 5: none marked
 	MPLBACKEND=Agg $(BIN)/python benchmarks/run_all.py
 
 clean:

@@ -1,10 +1,12 @@
 """The slow tests' wall seconds, measured in `make acceptance` on 2 cores (session 25,
 `--durations=0`, setup + call; a parametrised test's figure is one parameter's):
 :func:`order_slowest_first` puts them in that order, so that xdist's load scheduling hands the
-long tests out first, alternately to its two workers (longest-processing-time first), instead of
-leaving one worker to run the last long tests alone while the other idles (session 25: 3207 s,
-~20 min of it on one worker; with this order the tail remained, since xdist pre-queues its first
-dozen tests: docs/module-random.md, session 25).
+long tests out first, one at a time to whichever worker is free (longest-processing-time
+first). The Makefile's ``--maxschedchunk 1`` makes it one at a time: by default xdist sends
+each worker its first ~dozen tests as one consecutive block, which with this order put the
+five longest on one worker (session 25: ~20 min of the acceptance stage on one worker while
+the other idled). Replaying xdist 3.8's scheduler over session 25's durations: 3192 s in file
+order, 3750 s longest first in blocks, 2484 s longest first one at a time (half the total).
 
 A test missing here counts 0 and keeps its collection order after the listed ones; re-measure
 with ``make acceptance`` (it prints ``--durations=20``) when a slow test is added.
