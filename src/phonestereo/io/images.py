@@ -141,7 +141,9 @@ def size_mismatch(
     )
 
 
-def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int = 95) -> Path:
+def write_image(
+    path: str | os.PathLike[str], image: Any, *, jpeg_quality: int = 95, noisy: bool = False
+) -> Path:
     """Write an image as PNG (lossless, deterministic bytes) or JPEG, chosen by the suffix.
 
     Parameters
@@ -152,6 +154,11 @@ def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int =
         uint8 (or uint16 for PNG).
     jpeg_quality : int
         JPEG quality 1–100 (ignored for PNG).
+    noisy : bool
+        PNG only: the image is sensor noise down to single pixels (a raw capture). Its PNG is
+        then Huffman-coded without LZ77's search for repeats, which noise does not have: a
+        rendered 2000 × 1500 capture encodes in 0.104 s instead of 0.174 s, and 12 % smaller
+        (session 26). Smooth images compress far better with the default.
 
     Returns
     -------
@@ -180,6 +187,8 @@ def write_image(path: str | os.PathLike[str], image: Any, *, jpeg_quality: int =
         )
     if suffix in _PNG:
         params = [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION]
+        if noisy:
+            params += [cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY]
     else:
         if not 1 <= int(jpeg_quality) <= 100:
             raise InputError(f"jpeg_quality must be in 1..100, got {jpeg_quality}")

@@ -49,7 +49,7 @@ def _render_one(job: tuple[Any, ...]) -> str:
     images = render_capture_images(module, state, scene, rng)
     for path, image in zip((path_wide, path_tele), images, strict=True):
         if image.data is None:
-            write_image(path, image.gray)
+            write_image(path, image.gray, noisy=module.effects.sensor_noise)
         else:  # the ISP's file bytes, as a phone stores them (no re-encoding)
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             Path(path).write_bytes(image.data)
