@@ -36,6 +36,16 @@ SECONDS = {
     "test_analysis_heating::test_temperature_reporting_module": 34,
     "test_analysis_essential::test_default_scenario": 33,
     "test_sim_render::test_full_size_corner_accuracy_table": 32,
+    # make unit (whole modules per worker, `--dist loadscope`): the test that builds its
+    # module's shared fixture, setup + call (session 26, `--durations=10`), so the heaviest
+    # modules are handed out first
+    "test_flow_bench::test_full_flow_fixes_the_naive_error": 94,
+    "test_calib_sim::test_boards_recover_truth_within_covariance": 34,
+    "test_analysis_wt_scale::test_refocus_range_shrinks_and_scale_recovered": 27,
+    "test_analysis_repeatability::test_median_normalisation_and_averaging": 26,
+    "test_learn::test_learn_capture_set_into_store": 18,
+    "test_analysis_heating::test_quick_set_tau_saturation_and_gates": 18,
+    "test_match_isp::test_real_phone_pairs_consistency_lower_bound": 17,
 }
 
 
