@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from phonestereo.heap import MALLOC_VARIABLES
+from phonestereo.heap import USER_VARIABLES
 
 pytestmark = pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc only")
 
@@ -32,7 +32,7 @@ _CODE = (
 
 
 def _run(tune: bool, **env: str) -> tuple[str, int]:
-    clean = {k: v for k, v in os.environ.items() if k not in MALLOC_VARIABLES}
+    clean = {k: v for k, v in os.environ.items() if k not in USER_VARIABLES}
     out = subprocess.run(
         [sys.executable, "-c", _CODE, "1" if tune else "0"],
         capture_output=True, text=True, check=True, env={**clean, **env},
@@ -49,6 +49,15 @@ def test_large_arrays_come_from_the_heap_not_fresh_mappings() -> None:
     assert default >= 64 << 20, default  # glibc's default: a fresh mmap per large array
 
 
-def test_a_malloc_setting_the_user_made_is_kept() -> None:
-    tuned, mapped = _run(True, MALLOC_MMAP_MAX_="65536")
+@pytest.mark.parametrize(
+    "env",
+    [
+        {"MALLOC_MMAP_MAX_": "65536"},
+        {"MALLOC_MMAP_THRESHOLD_": "131072"},
+        {"MALLOC_TRIM_THRESHOLD_": "131072"},
+        {"PHONESTEREO_MALLOC": "default"},
+    ],
+)
+def test_a_malloc_setting_the_user_made_is_kept(env: dict[str, str]) -> None:
+    tuned, mapped = _run(True, **env)
     assert tuned == "False" and mapped >= 64 << 20, (tuned, mapped)

@@ -35,11 +35,11 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from phonestereo.errors import InputError
-from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
 from phonestereo.features.crlb import einsum, sandwich, solve_spd
 from phonestereo.features.refinement import Refinement
 from phonestereo.features.spline_gradients import PREFILTER, TAPS, image_gradients
+from phonestereo.heap import keep_large_arrays_on_the_heap
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -253,7 +253,7 @@ def refine_lk(
     InputError
         A window is not inside ``left``.
     """
-    retain_freed_memory()  # the windows' arrays are megabytes (features/_heap.py)
+    keep_large_arrays_on_the_heap()  # the windows' arrays are megabytes (phonestereo.heap)
     xy = np.asarray(xy, dtype=np.int64).reshape(-1, 2)
     n, r = len(xy), int(radius)
     h, w = left.shape

@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from phonestereo.errors import InputError
-from phonestereo.features._heap import retain_freed_memory
 from phonestereo.features._threads import background
 from phonestereo.fixes.distortion import RadialResidualFix
 from phonestereo.fixes.radial_residual import correct_matches
@@ -41,6 +40,7 @@ from phonestereo.flows.roi_window import (
 from phonestereo.flows.view_box import inscribed_box, outline, tele_outline
 from phonestereo.geometry import Rig
 from phonestereo.geometry.checks import Array, frozen
+from phonestereo.heap import keep_large_arrays_on_the_heap
 from phonestereo.rectification import Rectification, RectifyOptions, check_pair
 
 F64 = Array
@@ -246,7 +246,7 @@ def measure_roi(
         ``ok`` False with a reason when the ROI gives no measurement (no texture, no surface,
         too few matches) — never an exception for data-caused failures.
     """
-    retain_freed_memory()  # page faults were ~10 % of this call's CPU (features/_heap.py)
+    keep_large_arrays_on_the_heap()  # page faults were ~10 % of this call's CPU (phonestereo.heap)
     cfg = config or RoiConfig()
     if cfg.expand < 1.0:
         raise InputError(f"ROI expansion must be >= 1, got {cfg.expand}")
