@@ -6,14 +6,12 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # pytest workers: both cores by default
 JOBS ?= 2
-# The slow tests (make acceptance): xdist hands each worker one test at a time, longest first
-# (its default sends the first dozen in one block: with the longest first that put the five
-# longest on one worker, tests/_support/slow_order.py).
-XDIST_SLOW = -n $(JOBS) --maxschedchunk 1
-# The fast ones (make unit): whole test modules per worker, in collection order (the heaviest
-# first, tests/_support/slow_order.py), so a module's shared fixture is built once, not on both
-# workers (one test at a time rendered test_flow_bench's 94 s set twice).
-XDIST_FAST = -n $(JOBS) --dist loadscope --no-loadscope-reorder
+# xdist hands out whole test modules, in collection order, which tests/conftest.py makes the
+# longest first (tests/_support/slow_order.py): a module's shared fixture is built once, not on
+# both workers (one test at a time built test_flow_bench's 94 s set twice), and the long tests
+# reach both workers (xdist's default load scheduling sends the first dozen tests to one worker
+# as a block: the five longest on one worker, ~20 min of the acceptance stage alone).
+XDIST = -n $(JOBS) --dist loadscope --no-loadscope-reorder
 
 .PHONY: all install demo test lint typecheck imports unit acceptance bench clean
 
@@ -41,7 +39,7 @@ imports: $(STAMP)
 	$(BIN)/lint-imports
 
 unit: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST_FAST) --durations=20
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) --durations=20
 
 test: lint typecheck imports unit
 
@@ -49,10 +47,10 @@ test: lint typecheck imports unit
 # test); `make test` runs the fast ones. .ci/run runs both, with CI=true (missing real data or
 # Chromium fails instead of skipping).
 acceptance: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST_SLOW) -m 'slow and not bench' -rs --durations=0
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) -m 'slow and not bench' -rs --durations=0
 
 bench: acceptance
-	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST_SLOW) -m bench -rs || [ $$? -eq 5 ]  # 5: none marked
+	MPLBACKEND=Agg $(BIN)/pytest -q $(XDIST) -m bench -rs || [ $$? -eq 5 ]  # 5: none marked
 	MPLBACKEND=Agg $(BIN)/python benchmarks/run_all.py
 
 clean:
