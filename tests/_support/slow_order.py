@@ -1,13 +1,14 @@
-"""The slow tests' wall seconds, measured in `make acceptance` on 2 cores (session 26,
-`--durations=0`, setup + call; a parametrised test's figure is one parameter's), and the heavy
+"""The slow tests' wall seconds, measured in `make acceptance` on 2 cores (session 26's first
+run, `--durations=0`, setup + call; a parametrised test's figure is one parameter's), and the heavy
 module fixtures of `make unit`: :func:`order_slowest_first` puts them in that order, longest
 first. The Makefile's ``--dist loadscope --no-loadscope-reorder`` hands whole test modules to
 whichever worker is free in that order (longest-processing-time first), so the long tests
 start at once on both workers and a module's fixture is built on one. xdist's default load
 scheduling sent each worker its first ~dozen tests as one block, which with this order put the
 five longest on one worker (session 25: ~20 min of the acceptance stage on one worker while the
-other idled). Session 26's acceptance stage: 1965 s wall for 3887 s of tests (replaying the
-scheduler over those durations: 1943 s, half the total).
+other idled). Session 26's first run (one test at a time): 1965 s wall for 3887 s of tests
+(replaying the scheduler over those durations: 1943 s, half the total); with whole modules and
+the naive breakdown in `make bench`: 1601 s for 3158 s.
 
 A test missing here counts 0 and keeps its collection order after the listed ones; re-measure
 with ``make acceptance`` (it prints every duration) when a slow test is added.
