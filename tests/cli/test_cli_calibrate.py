@@ -46,11 +46,13 @@ def test_stereo_calibration_json(tmp_path: Path) -> None:
     # |t| with its σ (first order): the sample's 3.33 squares, known to ~1e-3 of a square.
     assert summary["baseline"]["norm"] == pytest.approx(np.linalg.norm(summary["T_tele_wide"]["t"]))
     assert 1e-4 < summary["baseline"]["std"] < 0.01
-    # The corner σ the image noise predicts (JPEG, sharp corners: ~0.002 px) is far below the
-    # residual RMS (0.12 px): the sample's misfit is the board and the images, not noise.
+    # The corner σ: from the image noise alone these JPEGs read ~0.002 px (nearly noise-free),
+    # with the saddle fit's own odd misfit (features/saddle_misfit.py) 0.03-0.04 px; still under
+    # the residual RMS (0.12 px per coordinate), which also holds the lens model's and the
+    # board's misfit.
     sig = summary["corner_sigma_px"]
-    assert set(sig) == {"wide", "tele"} and all(1e-4 < v < 0.01 for v in sig.values())
-    assert summary["rms_px_per_coordinate"] > 10 * max(sig.values())
+    assert set(sig) == {"wide", "tele"} and all(0.015 < v < 0.08 for v in sig.values()), sig
+    assert summary["rms_px_per_coordinate"] > 1.5 * max(sig.values())
     saved = json.loads((tmp_path / "calibration.json").read_text())
     assert saved["rms_px"] == pytest.approx(summary["rms_px_per_point"])
 

@@ -13,7 +13,7 @@ from phonestereo.calibration.solve import CalibrationOptions, calibrate_stereo
 from phonestereo.calibration.views import BoardView, chessboard_object_points
 from phonestereo.errors import ShapeError
 from phonestereo.features.noise_level import NoiseLevel
-from phonestereo.features.saddle import refine_saddle
+from phonestereo.features.saddle import position_covariance, refine_saddle
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "opencv_stereo"
 
@@ -113,27 +113,41 @@ def test_saddle_corners_calibrate_better_than_cornersubpix() -> None:
 def test_predicted_covariance_matches_the_scatter_over_noise(
     angle: float, radius: float, blur: float
 ) -> None:
-    """The first-order covariance against 200 noise draws (σ = 2 DN) of the same board.
+    """The first-order noise covariance against 200 noise draws (σ = 2 DN) of the same board.
 
     200 draws give each corner's σ to ±5 %, the mean over its ~16 corners to ±1.5 %; the
-    noise itself is estimated from each image (estimate_noise_level, ±3 % here).
+    noise itself is estimated from each image (estimate_noise_level, ±3 % here). The noise
+    part is :func:`position_covariance` at the estimated noise; what ``refine_saddle`` reports
+    is that or the image's own misfit where larger (features/saddle_misfit.py), checked
+    against the truth below.
     """
     img, corners = _render_board(np.array([0.3, -0.2]), angle, 20.0 if angle > 0.5 else 16.0)
     corners = corners[np.all(np.abs(corners - 47.5) < 30, axis=1)]
     rng = np.random.default_rng(5)
-    pts, cov, noise = [], [], []
+    pts, cov, noise, reported = [], [], [], []
     for _ in range(200):
         noisy = img + rng.normal(0.0, 2.0, img.shape).astype(np.float32)
         start = corners + rng.normal(0.0, 0.3, corners.shape)
         res = refine_saddle(noisy, start, radius_px=radius, blur_sigma_px=blur)
         assert res.ok.all()
+        f = cv2.GaussianBlur(noisy, (0, 0), blur)
+        at = np.round(res.points).astype(int)
+        var = res.noise.variance(f[at[:, 1], at[:, 0]])  # the noise at each junction
         pts.append(res.points)
-        cov.append(res.covariance_px2)
+        cov.append(position_covariance(f, res.points, radius, blur, var))
+        reported.append(res.covariance_px2)
         noise.append(np.sqrt(res.noise.variance(125.0)))
     ratio = np.std(pts, axis=0) / np.sqrt(np.diagonal(np.mean(cov, axis=0), axis1=1, axis2=2))
     assert np.mean(noise) == pytest.approx(2.0, rel=0.05)
     assert 0.9 < ratio.mean() < 1.1, ratio.mean(axis=0)
     assert 0.75 < ratio.min() and ratio.max() < 1.25, (ratio.min(), ratio.max())
+    # The reported σ against the truth (noise and the render's own corner error): never
+    # optimistic, at most ~1.5x conservative (measured RMS z 0.69 / 0.85 / 0.84: these small
+    # area-sampled boards leave odd, grid-locked structure that moves the corner less than
+    # white noise of its energy would).
+    sig = np.sqrt(np.diagonal(np.mean(reported, axis=0), axis1=1, axis2=2))
+    z = (np.array(pts) - corners) / sig
+    assert 0.6 < float(np.sqrt(np.mean(z**2))) < 1.1
 
 
 def test_covariance_of_a_prefiltered_image_is_the_same() -> None:

@@ -98,20 +98,28 @@ def test_with_2_dn_noise_beats_cornersubpix_from_the_same_points(wide) -> None: 
     assert ours < 0.03  # σ = 2 DN on a ~180 DN edge; measured ≈ 0.012 px
 
 
-def test_predicted_corner_sigma_matches_the_noise_induced_error(wide) -> None:  # type: ignore[no-untyped-def]
-    """Each corner's σ predicted from the image noise (estimated from the image) against the
-    shift noise causes: the noisy detection minus the noise-free one, same render. ~1000
-    corners: the RMS ratio is known to ~2 %; measured 0.97."""
-    dn, _ = wide
+def test_predicted_corner_sigma_covers_the_error(wide) -> None:  # type: ignore[no-untyped-def]
+    """Each corner's σ (the image noise, estimated from the image, or the fit's own misfit
+    where larger: features/saddle_misfit.py) against its error to the truth, ~1000 corners.
+
+    From the noise alone σ matched the shift noise causes (noisy minus noise-free detection:
+    RMS z 0.97) but not the error: the render's own corner error (0.0077 px noise-free) adds
+    to it, 0.0104 px in all. With the misfit, RMS z against the truth is 0.75 (σ 0.0136 px
+    median): on the side of caution on this linear render, where the grid-locked odd structure
+    of the area sampling moves corners less than white noise of its energy; honest on phone
+    ISP JPEGs (tests/features/test_saddle_misfit.py: 1.06, 30 from the noise alone)."""
+    dn, truth = wide
     clean = detect_verification_chart(_digitise(dn, 0.0))
     det = detect_verification_chart(_digitise(dn, 2.0, seed=4))
+    assert len(det.ids) > 1000
+    z = _errors(det, truth) / det.sigma_px[:, None]
+    assert 0.65 < np.sqrt(np.mean(z**2)) < 1.1
+    assert np.mean(np.abs(z) > 3) < 0.01  # Gaussian: 0.27 %
+    # the noise-induced shift is within σ (σ is not smaller than what the noise causes)
     at = {tuple(i): p for i, p in zip(clean.ids, clean.points, strict=True)}
     both = np.array([tuple(i) in at for i in det.ids])
     shift = det.points[both] - np.array([at[tuple(i)] for i in det.ids[both]])
-    z = shift / det.sigma_px[both, None]
-    assert both.sum() > 1000
-    assert 0.9 < np.sqrt(np.mean(z**2)) < 1.1
-    assert np.mean(np.abs(z) > 3) < 0.01  # Gaussian: 0.27 %
+    assert np.sqrt(np.mean((shift / det.sigma_px[both, None]) ** 2)) < 1.1
 
 
 def test_tele_sees_part_of_the_chart_and_labels_match_the_wide(wide) -> None:  # type: ignore[no-untyped-def]

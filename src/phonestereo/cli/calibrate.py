@@ -147,7 +147,7 @@ def calibrate(
     table.add_row("RMS per coordinate (mrcal)", f"{result.rms_px_per_coordinate:.4f} px")
     table.add_row("outliers", f"{result.n_outliers} of {result.inliers.size}")
     sig = ", ".join(f"{k} {v:.4f}" for k, v in corner_sigma.items())
-    table.add_row("corner σ from image noise", f"{sig} px (median)")
+    table.add_row("corner σ (noise or misfit)", f"{sig} px (median)")
     for c, cam in enumerate(result.cameras):
         who = ("wide", "tele")[c] if len(result.cameras) == 2 else "camera"
         sd = result.std

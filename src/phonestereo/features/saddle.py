@@ -12,6 +12,9 @@ Each refined corner also gets the covariance the image noise gives it
 (:func:`position_covariance`, with the signal-dependent noise level of
 :mod:`phonestereo.features.noise_level`): on rendered charts its σ is within 4 % of the scatter
 that noise causes (verification chart, wide chessboards) and 11–19 % low on the blurrier tele.
+A processed image (a phone's JPEG) displaces corners by more than its noise does; the fit's own
+odd residual measures that misfit (:mod:`phonestereo.features.saddle_misfit`), and the
+covariance uses it where it exceeds the noise.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ import numpy as np
 
 from phonestereo.errors import InputError, ShapeError
 from phonestereo.features.noise_level import NoiseLevel, estimate_noise_level
+from phonestereo.features.saddle_misfit import misfit_variance
+from phonestereo.features.saddle_window import fit_window
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,39 +45,21 @@ class SaddleCorners:
     saddle_strength: np.ndarray
     #: ndarray, shape (N,). Distance moved from the starting point.
     shift_px: np.ndarray
-    #: ndarray, shape (N, 2, 2). Predicted covariance of each point from the image noise (first
-    #: order through the fit, see :func:`position_covariance`), px²; NaN where the fit failed.
+    #: ndarray, shape (N, 2, 2). Predicted covariance of each point from the image noise, or the
+    #: image's misfit where larger (first order through the fit, see :func:`position_covariance`
+    #: and ``misfit_var``), px²; NaN where the fit failed.
     covariance_px2: np.ndarray
     #: The image's noise level used for it (σ² = a + b·I, at each corner's intensity).
     noise: NoiseLevel
+    #: The corners' misfit as a pixel-noise variance, intensity units²
+    #: (:func:`~phonestereo.features.saddle_misfit.misfit_variance`): the covariance uses it
+    #: where it exceeds the noise (processed images: demosaicing, denoising, sharpening, JPEG).
+    misfit_var: float = 0.0
 
     @property
     def sigma_px(self) -> np.ndarray:
         """Predicted position σ per coordinate, √(trace / 2) of each covariance, px; (N,)."""
         return np.sqrt(np.trace(self.covariance_px2, axis1=1, axis2=2) / 2)
-
-
-def _window(
-    centres: np.ndarray, radius: float, shape: tuple[int, ...] | None = None
-) -> tuple[np.ndarray, ...]:
-    """Sample pixels (clipped to ``shape`` if given), design matrix and weights of the fit's
-    (2⌈radius⌉ + 1)² window around each centre."""
-    r = int(np.ceil(radius))
-    k = np.arange(-r, r + 1)
-    gx, gy = np.meshgrid(k, k)
-    base = np.round(centres).astype(np.int64)  # (k, 2)
-    xs = base[:, 0, None] + gx.ravel()[None, :]
-    ys = base[:, 1, None] + gy.ravel()[None, :]
-    if shape is not None:
-        xs = np.clip(xs, 0, shape[1] - 1)
-        ys = np.clip(ys, 0, shape[0] - 1)
-    u = xs - centres[:, 0, None]
-    v = ys - centres[:, 1, None]
-    d2 = u * u + v * v
-    sigma = radius / 2.0
-    wts = np.exp(-d2 / (2 * sigma**2)) * np.clip(radius + 0.5 - np.sqrt(d2), 0.0, 1.0)
-    A = np.stack([u * u, u * v, v * v, u, v, np.ones_like(u)], axis=2)  # (k, n, 6)
-    return xs, ys, A, wts
 
 
 @lru_cache(maxsize=32)
@@ -131,7 +118,7 @@ def position_covariance(
     -------
     ndarray, shape (N, 2, 2)
     """
-    _, _, A, wts = _window(centres, radius)
+    _, _, A, wts = fit_window(centres, radius)
     Aw = A * wts[..., None]
     N = np.swapaxes(Aw, 1, 2) @ A
     L = np.linalg.solve(N, np.swapaxes(Aw, 1, 2))[:, 3:5]  # (k, 2, n): rows of d and e
@@ -169,7 +156,7 @@ def _fit(f: np.ndarray, centres: np.ndarray, radius: float) -> np.ndarray:
     pixel centres); the Gaussian weights (σ = radius / 2, cut at the radius) are centred on the
     current sub-pixel estimate, so the fit moves smoothly with it.
     """
-    xs, ys, A, wts = _window(centres, radius, f.shape)
+    xs, ys, A, wts = fit_window(centres, radius, f.shape)
     samples = f[ys, xs].astype(np.float64)  # (k, n)
     Aw = A * wts[..., None]
     AwT = np.swapaxes(Aw, 1, 2)  # batched matmul: 2x faster than the equivalent einsum
@@ -268,10 +255,15 @@ def refine_saddle(
     out = np.where(ok[:, None], cur, start)
     level = estimate_noise_level(img) if noise is None else noise
     cov = np.full((pts.shape[0], 2, 2), np.nan)
+    misfit = 0.0
     if ok.any():
         total_blur = float(np.hypot(blur_sigma_px, prefilter_sigma_px))  # Gaussians compose
         # the fit's constant term is the intensity at the junction: the mean of its squares
         var = level.variance(coef[ok, 5])
+        # a processed image's misfit, as a pixel-noise variance (saddle_misfit), where it
+        # exceeds the noise
+        misfit = misfit_variance(f, cur[ok], radius_px, total_blur)
+        var = np.maximum(var, misfit)
         # the last fit ran < tol_px from the final point: its gradient serves as the base
         cov[ok] = position_covariance(f, cur[ok], radius_px, total_blur, var, coef[ok, 3:5])
-    return SaddleCorners(out, ok, strength, shift, cov, level)
+    return SaddleCorners(out, ok, strength, shift, cov, level, misfit)
