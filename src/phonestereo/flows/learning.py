@@ -45,13 +45,11 @@ from phonestereo.io import Calibration, CaptureEntry, CaptureSet, read_gray
 from phonestereo.io.fingerprint import capture_set_fingerprint
 from phonestereo.learning.chart_pitch import CHART_PITCH_M
 from phonestereo.learning.ipd import IpdPrior
-from phonestereo.learning.learn import learn_capture
+from phonestereo.learning.learn import Progress, learn_capture
 from phonestereo.learning.observation import Observation, typical_correction_px
 from phonestereo.learning.provenance import StoreContext
 from phonestereo.learning.store import FixStore
 from phonestereo.rectification import Rectification
-
-Progress = Callable[[int, int, str], None]
 
 
 @dataclass(frozen=True)

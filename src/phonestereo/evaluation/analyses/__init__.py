@@ -24,8 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from phonestereo.errors import InputError
-
-Progress = Callable[[int, int, str], None]
+from phonestereo.evaluation.runner import Progress
 
 
 @dataclass(frozen=True)
