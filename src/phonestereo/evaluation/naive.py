@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from phonestereo.errors import ShapeError
+from phonestereo.geometry import depth_from_disparity
 from phonestereo.geometry.checks import Array, as_points
 from phonestereo.io import Calibration
 
@@ -84,8 +85,7 @@ def naive_depth(q_wide: Any, q_tele: Any, calibration: Calibration) -> Array:
     2.0
     """
     d = naive_disparity(q_wide, q_tele, calibration)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(d > 0, calibration.rig.wide.f * calibration.rig.baseline_m / d, np.nan)
+    return depth_from_disparity(d, calibration.rig.wide.f, calibration.rig.baseline_m)
 
 
 def naive_relative_errors(
