@@ -26,8 +26,9 @@ It errs on the side of caution where the odd structure is the pixel grid's own (
 area-sampled synthetic boards: RMS z 0.69–0.85), which moves a corner less than white noise
 of its energy would.
 
-Hand-written: SciPy gives the spline (``ndimage.map_coordinates``), but no library estimates a
-fit's odd misfit or its white-noise equivalent.
+Hand-written: SciPy gives the spline's prefilter (``ndimage.spline_filter1d``), but no library
+estimates a fit's odd misfit or its white-noise equivalent; the spline is evaluated by 16 gathers
+(``map_coordinates`` over the stack of patches would interpolate across the stack too).
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ def odd_residual_m2(f: np.ndarray, centres: np.ndarray, radius: float) -> np.nda
 
     >>> y, x = np.mgrid[0:40, 0:40].astype(float)
     >>> f = (x - 20.3) ** 2 - (y - 19.6) ** 2 + 0.5 * (x - 20.3)
-    >>> float(odd_residual_m2(f, np.array([[20.3, 19.6]]), 5.0)[0]) < 1e-8
+    >>> float(odd_residual_m2(f, np.array([[20.3, 19.6]]), 5.0)[0]) < 1e-4  # of f² ~ 1e4
     True
     """
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
@@ -82,21 +83,44 @@ def odd_residual_m2(f: np.ndarray, centres: np.ndarray, radius: float) -> np.nda
     ys = np.clip(base[:, 1, None, None] + k[None, :, None], 0, rows - 1)
     xs = np.clip(base[:, 0, None, None] + k[None, None, :], 0, cols - 1)
     coef = np.asarray(f, dtype=np.float64)[ys, xs]  # (N, P, P) patches
-    for axis in (1, 2, 0):  # along the patches too: the interpolant is exact at integer k
+    for axis in (1, 2):
         coef = ndimage.spline_filter1d(coef, 3, axis=axis, mode="mirror")
     xw, yw, A, wts = fit_window(c, radius, f.shape)
     px = 2 * c[:, 0, None] - xw - (base[:, 0, None] - h)  # reflected points, patch coordinates
     py = 2 * c[:, 1, None] - yw - (base[:, 1, None] - h)
-    kk = np.broadcast_to(np.arange(len(c), dtype=np.float64)[:, None], px.shape)
-    refl = ndimage.map_coordinates(
-        coef, [kk.ravel(), py.ravel(), px.ravel()], order=3, prefilter=False, mode="mirror"
-    ).reshape(px.shape)
+    refl = _spline_at(coef, px, py)
     odd = (np.asarray(f, dtype=np.float64)[yw, xw] - refl) / 2
     lin = A[..., 3:5]  # u, v
     lw = lin * wts[..., None]
     coeffs = np.linalg.solve(np.swapaxes(lw, 1, 2) @ lin, np.swapaxes(lw, 1, 2) @ odd[..., None])
     odd -= (lin @ coeffs)[..., 0]
     return np.asarray((wts * odd * odd).sum(axis=1) / wts.sum(axis=1))
+
+
+def _cubic_weights(t: np.ndarray) -> np.ndarray:
+    """Cubic B-spline weights (..., 4) of the taps at offsets −1, 0, 1, 2 from floor(x)."""
+    t2 = t * t
+    t3 = t2 * t
+    g = 1 - t
+    return np.stack([g * g * g, 4 - 6 * t2 + 3 * t3, 1 + 3 * (t + t2 - t3), t3], -1) / 6
+
+
+def _spline_at(coef: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Cubic B-spline of coefficient patches ``coef`` (N, P, P) at (px, py) (N, n), patch
+    coordinates at least 1 px inside: 16 gathers, not ``map_coordinates`` over the stack (whose
+    third axis would cost 4× the taps)."""
+    n, p, _ = coef.shape
+    ix, iy = np.floor(px).astype(np.int64), np.floor(py).astype(np.int64)
+    wx, wy = _cubic_weights(px - ix), _cubic_weights(py - iy)
+    flat = coef.reshape(-1)
+    start = (np.arange(n)[:, None] * p + iy - 1) * p + ix - 1
+    out = np.zeros(px.shape)
+    for a in range(4):
+        row = np.zeros(px.shape)
+        for b in range(4):
+            row += wx[..., b] * flat[start + a * p + b]
+        out += wy[..., a] * row
+    return out
 
 
 @lru_cache(maxsize=128)
