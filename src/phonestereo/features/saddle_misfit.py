@@ -20,7 +20,7 @@ the median of that over its corners (one corner's window is a noisy estimate, an
 misfit is a property of the image); the covariance then uses max(noise variance, misfit
 variance) per corner, so noise-limited images keep their σ (the median of the white-noise ratio
 is ≈ 0.9, under 1) while processed ones get the misfit they carry. On the ISP renders the RMS z
-is then 1.04 / 0.96 (wide / tele; linear renders 0.94 / 0.86, 1.26 / 1.66 before, from the
+is then 1.05 / 0.97 (wide / tele; linear renders 0.95 / 0.86, 1.26 / 1.66 before, from the
 renderer's own sub-0.01 px corner error), and the OpenCV sample's corners read 0.032 / 0.039 px.
 It errs on the side of caution where the odd structure is the pixel grid's own (small
 area-sampled synthetic boards: RMS z 0.69–0.85), which moves a corner less than white noise
