@@ -186,8 +186,11 @@ def test_opencv_stereo_sample_against_opencv() -> None:
     )
     wv = [BoardView(obj, c, np.arange(54), "L") for c in left]
     tv = [BoardView(obj, c, np.arange(54), "R") for c in right]
-    plain = calibrate_stereo(wv, tv, (size, size), CalibrationOptions(reject_outliers=False))
-    # Same model, same corners, no rejection: at least as good as OpenCV's joint solve (0.446).
+    plain = calibrate_stereo(
+        wv, tv, (size, size), CalibrationOptions(reject_outliers=False, view_weights=False)
+    )
+    # Same model, same corners, no rejection, every corner alike (OpenCV's criterion): at least
+    # as good as OpenCV's joint solve (0.446).
     assert plain.rms_px_per_point <= rms_cv + 1e-6
     robust = calibrate_stereo(wv, tv, (size, size))
     # Issue #3: with rejection ≤ 0.14 px per coordinate (mrcal: 0.129 px, 2.4 % rejected).
@@ -215,3 +218,34 @@ def test_mono_result_has_no_baseline() -> None:
     res = calibrate_camera(views, wide.size)
     with pytest.raises(InputError, match="--tele"):
         res.baseline()
+
+
+def test_views_weighted_by_their_own_residuals_keep_noisy_views_and_honest_covariance() -> None:
+    # A phone's far boards are noisier (on the presets' ISP the wide's views of the tele poses
+    # err 0.04-0.055 px against 0.012-0.017 px; calibration/view_weights.py). Here every third
+    # view has 4x the noise. With one pooled σ the solve takes those views' corners for outliers
+    # and its covariance is off; each view weighted by its own residual σ keeps them, d²/P ≈ 1.
+    wide, tele, rel = _true_rig()
+    obj = chessboard_object_points((12, 9), 0.015)
+    d2: dict[str, list[float]] = {"pooled": [], "per view": []}
+    rejected = {"pooled": 0, "per view": 0}
+    for seed in range(4):
+        rng = np.random.default_rng(40 + seed)
+        poses = _board_poses(rng, 12, 0.45)
+        sig = [0.2 if i % 3 == 0 else 0.05 for i in range(len(poses))]
+        wv = [_views(wide, [T], obj, rng, sig[i])[0] for i, T in enumerate(poses)]
+        tv = [_views(tele, [rel @ T], obj, rng, sig[i])[0] for i, T in enumerate(poses)]
+        truth = Layout((wide.lens, tele.lens), (wide.size, tele.size), len(poses), True).pack(
+            (wide, tele), rel, tuple(poses)
+        )
+        for key in d2:
+            opts = CalibrationOptions(view_weights=key == "per view")
+            res = calibrate_stereo(wv, tv, (wide.size, tele.size), opts)
+            err = res.parameters - truth
+            d2[key].append(float(err @ np.linalg.solve(res.covariance, err)) / err.size)
+            rejected[key] += res.n_outliers
+    # measured: pooled d²/P 4.5-5.9 with 1594 corners rejected (whole noisy views); per view
+    # 0.87-1.12 (mean 1.04) with 35 rejected (χ² at 99.7 %: ~0.3 % of ~10000 corners); 4 seeds
+    # × ~130 parameters give the mean d²/P to ±0.06
+    assert 0.85 < np.mean(d2["per view"]) < 1.15, d2
+    assert rejected["per view"] < 60 and rejected["pooled"] > 10 * rejected["per view"], rejected

@@ -57,6 +57,21 @@ def test_stereo_calibration_json(tmp_path: Path) -> None:
     assert saved["rms_px"] == pytest.approx(summary["rms_px_per_point"])
 
 
+def test_view_weights_keep_the_noisier_views(tmp_path: Path) -> None:
+    code, out = _run(
+        "calibrate", "--board", "9x6", "--square-m", "1", "--wide", str(DATA / "left*.jpg"),
+        "--tele", str(DATA / "right*.jpg"), "--out", str(tmp_path / "c.json"), "--json",
+        "--view-weights",
+    )
+    assert code == 0, out
+    summary = json.loads(out.strip().splitlines()[-1])
+    # measured: 3 of 1402 corners rejected (20 with every corner alike), 0.127 px per
+    # coordinate over the kept ones (0.120): the solve keeps the noisier views' corners
+    assert summary["outliers"] / summary["points"] < 0.005
+    assert summary["rms_px_per_coordinate"] <= 0.14
+    assert abs(abs(summary["T_tele_wide"]["t"][0]) - 3.33) < 0.05  # square units
+
+
 def test_wrong_board_size_names_the_fix(tmp_path: Path) -> None:
     code, out = _run(
         "calibrate",

@@ -94,14 +94,19 @@ def test_saddle_corners_calibrate_better_than_cornersubpix() -> None:
             sd = refine_saddle(img, c.reshape(-1, 2).astype(float), radius_px=6.0).points
             views["subpix"][cam].append(BoardView(obj, sp, np.arange(54), path))
             views["saddle"][cam].append(BoardView(obj, sd, np.arange(54), path))
-    opts = CalibrationOptions(reject_outliers=False)
+    opts = CalibrationOptions(reject_outliers=False, view_weights=False)  # as OpenCV solves
     rms = {
         k: calibrate_stereo(v[0], v[1], ((640, 480),) * 2, opts).rms_px_per_point
         for k, v in views.items()
     }
     # Measured: cornerSubPix 0.444 px, saddle 0.229 px per point (same model, same views).
     assert rms["saddle"] < 0.6 * rms["subpix"], rms
-    robust = calibrate_stereo(views["saddle"][0], views["saddle"][1], ((640, 480),) * 2)
+    # every corner alike, as mrcal and OpenCV weigh them (with each view weighed by its own
+    # residual σ, --view-weights: 0.127 px with 0.2 % rejected, tests/cli/test_cli_calibrate.py)
+    robust = calibrate_stereo(
+        views["saddle"][0], views["saddle"][1], ((640, 480),) * 2,
+        CalibrationOptions(view_weights=False),
+    )
     # mrcal reaches 0.129 px per coordinate rejecting 2.4 %; measured here 0.121 px with 1.4 %.
     assert robust.rms_px_per_coordinate < 0.125
     assert robust.n_outliers / robust.inliers.size < 0.024

@@ -21,6 +21,7 @@ from scipy.optimize import least_squares
 
 from phonestereo.calibration.bundle import Layout, Observations, residuals_and_jacobian
 from phonestereo.calibration.result import CalibrationResult
+from phonestereo.calibration.view_weights import view_weights, weighted_rows
 from phonestereo.calibration.views import BoardView
 from phonestereo.errors import ConvergenceError, InputError
 from phonestereo.geometry import Camera, Transform, make_lens
@@ -46,6 +47,13 @@ class CalibrationOptions:
     reject_outliers: bool = True
     #: Cap on rejection rounds.
     max_rounds: int = 10
+    #: Weight each view by its own residual σ (variance components,
+    #: :mod:`~phonestereo.calibration.view_weights`). On the presets' phone-ISP renders the wide's
+    #: far boards err 3× more than its near ones; the pooled solve rejected their corners as
+    #: outliers (28–73 a seed) and read d²/P 1.31 over six seeds, per view 1.00. Off by default:
+    #: on linear renders (the 20-seed covariance test) RMS z went 1.040 → 1.103 and d²/P
+    #: 1.091 → 1.079 (session 28). Off: every corner alike (OpenCV's and mrcal's criterion).
+    view_weights: bool = False
 
 
 def _initial_camera(
@@ -105,23 +113,27 @@ def _subset(obs: Observations, keep: np.ndarray) -> Observations:
 
 def _solve(
     layout: Layout, obs: Observations, x0: np.ndarray, options: CalibrationOptions
-) -> tuple[np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
     inliers = np.ones(obs.camera.shape[0], dtype=bool)
+    w = np.ones(obs.camera.shape[0])
     x = x0
     rounds = 0
     n_params = layout.n_params
     while True:
         sub = _subset(obs, inliers)
+        wr = np.repeat(w[inliers], 2)  # one weight per residual (x, y of each corner)
 
-        def fun(p: np.ndarray, sub: Observations = sub) -> np.ndarray:
-            return residuals_and_jacobian(p, layout, sub, with_jacobian=False)[0]
+        def fun(p: np.ndarray, sub: Observations = sub, wr: np.ndarray = wr) -> np.ndarray:
+            return residuals_and_jacobian(p, layout, sub, with_jacobian=False)[0] * wr
 
         # The Jacobian is built sparse; small problems (every phone calibration so far) solve
         # faster and more exactly with the dense trust-region step than with LSMR.
         dense = 2 * sub.camera.shape[0] * n_params <= DENSE_LIMIT
 
-        def jac(p: np.ndarray, sub: Observations = sub, dense: bool = dense):  # type: ignore[no-untyped-def]
-            j = residuals_and_jacobian(p, layout, sub)[1]
+        def jac(  # type: ignore[no-untyped-def]
+            p: np.ndarray, sub: Observations = sub, dense: bool = dense, wr: np.ndarray = wr
+        ):
+            j = weighted_rows(residuals_and_jacobian(p, layout, sub)[1], wr)
             return j.toarray() if dense and j is not None else j
 
         sol = least_squares(
@@ -138,15 +150,21 @@ def _solve(
         )
         x = sol.x
         rounds += 1
-        if not options.reject_outliers or rounds > options.max_rounds:
+        if not (options.reject_outliers or options.view_weights) or rounds > options.max_rounds:
             break
         r = residuals_and_jacobian(x, layout, obs, with_jacobian=False)[0].reshape(-1, 2)
-        sigma2 = trimmed_noise_variance(r[inliers], n_params, trimmed=not inliers.all())
-        new_inliers = np.sum(r**2, axis=1) <= CHI2_2DOF_997 * sigma2
-        if np.array_equal(new_inliers, inliers) or new_inliers.sum() < n_params:
+        new_w = view_weights(r, inliers, obs) if options.view_weights else w
+        new_inliers = inliers
+        if options.reject_outliers:  # the test in units of each view's own σ
+            rw = r * new_w[:, None]
+            sigma2 = trimmed_noise_variance(rw[inliers], n_params, trimmed=not inliers.all())
+            new_inliers = np.sum(rw**2, axis=1) <= CHI2_2DOF_997 * sigma2
+            if new_inliers.sum() < n_params:
+                break
+        if np.array_equal(new_inliers, inliers) and np.allclose(new_w, w, rtol=0.02):
             break
-        inliers = new_inliers
-    return x, inliers, rounds
+        inliers, w = new_inliers, new_w
+    return x, inliers, rounds, (w if options.view_weights else None)
 
 
 def trimmed_noise_variance(residuals: np.ndarray, n_params: int, *, trimmed: bool) -> float:
@@ -176,10 +194,19 @@ def trimmed_noise_variance(residuals: np.ndarray, n_params: int, *, trimmed: boo
 
 
 def _finish(
-    layout: Layout, obs: Observations, x: np.ndarray, inliers: np.ndarray, rounds: int, t0: float
+    layout: Layout,
+    obs: Observations,
+    x: np.ndarray,
+    inliers: np.ndarray,
+    rounds: int,
+    t0: float,
+    weights: np.ndarray | None = None,
 ) -> CalibrationResult:
     r, jac = residuals_and_jacobian(x, layout, _subset(obs, inliers))
     assert jac is not None
+    if weights is not None:  # σ² is then that of a view of σ_ref; J weighted alike
+        wr = np.repeat(np.asarray(weights, np.float64)[inliers], 2)
+        r, jac = r * wr, weighted_rows(jac, wr)
     sigma2 = trimmed_noise_variance(r.reshape(-1, 2), layout.n_params, trimmed=not inliers.all())
     jtj = (jac.T @ jac).toarray()
     try:
@@ -267,8 +294,8 @@ def calibrate_camera(
     cam0, poses = _initial_camera(views, size, options.model, options.n_radial)
     layout = Layout((cam0.lens,), (size,), len(views), stereo=False)
     obs = _observations([views])
-    x, inliers, rounds = _solve(layout, obs, layout.pack((cam0,), None, tuple(poses)), options)
-    return _finish(layout, obs, x, inliers, rounds, t0)
+    x, inliers, rounds, w = _solve(layout, obs, layout.pack((cam0,), None, tuple(poses)), options)
+    return _finish(layout, obs, x, inliers, rounds, t0, w)
 
 
 def calibrate_stereo(
@@ -323,9 +350,9 @@ def calibrate_stereo(
     poses = tuple(pw[i] if i in pw else rel.inverse() @ pt[i] for i in range(len(wide_views)))
     obs = _observations([wide_views, tele_views])
     x0 = layout.pack((res_w.cameras[0], res_t.cameras[0]), rel, poses)
-    x, inliers, rounds = _solve(layout, obs, x0, options)
+    x, inliers, rounds, w = _solve(layout, obs, x0, options)
     del cam_w, cam_t, poses_w, poses_t
-    return _finish(layout, obs, x, inliers, rounds, t0)
+    return _finish(layout, obs, x, inliers, rounds, t0, w)
 
 
 def intrinsic_extrinsic_covariance(result: CalibrationResult) -> tuple[tuple[str, ...], np.ndarray]:
