@@ -41,19 +41,18 @@ def view_weights(residuals: np.ndarray, inliers: np.ndarray, obs: Observations) 
     ndarray, shape (M,)
     """
     key = obs.camera.astype(np.int64) * (int(obs.view.max(initial=0)) + 1) + obs.view
-    groups = np.unique(key)
-    sig = np.full(groups.size, np.nan)
-    for g, k in enumerate(groups):
-        m = (key == k) & inliers
-        n = int(m.sum())
-        if n >= 8:
-            sig[g] = np.sqrt(np.sum(residuals[m] ** 2) / (2 * n - 6))
+    _, group = np.unique(key, return_inverse=True)
+    kept = np.asarray(inliers, dtype=np.float64)
+    n = np.bincount(group, weights=kept)
+    ss = np.bincount(group, weights=kept * np.sum(np.asarray(residuals) ** 2, axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sig = np.where(n >= 8, np.sqrt(ss / (2 * n - 6)), np.nan)
     ok = np.isfinite(sig) & (sig > 0)
     if not ok.any():
         return np.ones(key.size)
     ref = float(np.median(sig[ok]))
     sig = np.where(ok, np.maximum(sig, ref / 4), ref)
-    return np.asarray(ref / sig[np.searchsorted(groups, key)])
+    return np.asarray(ref / sig[group])
 
 
 def weighted_rows(jac: Any, wr: np.ndarray) -> Any:

@@ -40,6 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from phonestereo.features.saddle_window import fit_window
+from phonestereo.features.subpixel import cubic_bspline_weights
 
 #: Corners read for an image's median misfit (a verification chart has ~1000): beyond this
 #: the median is no better known than its spread over images, and the time is ~1/4.
@@ -101,21 +102,13 @@ def odd_residual_m2(f: np.ndarray, centres: np.ndarray, radius: float) -> np.nda
     return np.asarray((wts * odd * odd).sum(axis=1) / wts.sum(axis=1))
 
 
-def _cubic_weights(t: np.ndarray) -> np.ndarray:
-    """Cubic B-spline weights (..., 4) of the taps at offsets −1, 0, 1, 2 from floor(x)."""
-    t2 = t * t
-    t3 = t2 * t
-    g = 1 - t
-    return np.stack([g * g * g, 4 - 6 * t2 + 3 * t3, 1 + 3 * (t + t2 - t3), t3], -1) / 6
-
-
 def _spline_at(coef: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Cubic B-spline of coefficient patches ``coef`` (N, P, P) at (px, py) (N, n), patch
     coordinates at least 1 px inside: 16 gathers, not ``map_coordinates`` over the stack (whose
     third axis would cost 4× the taps)."""
     n, p, _ = coef.shape
     ix, iy = np.floor(px).astype(np.int64), np.floor(py).astype(np.int64)
-    wx, wy = _cubic_weights(px - ix), _cubic_weights(py - iy)
+    wx, wy = cubic_bspline_weights(px - ix), cubic_bspline_weights(py - iy)
     flat = coef.reshape(-1)
     start = (np.arange(n)[:, None] * p + iy - 1) * p + ix - 1
     out = np.zeros(px.shape)

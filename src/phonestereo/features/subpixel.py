@@ -45,7 +45,14 @@ F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
-__all__ = ["Refinement", "bspline_coefficients", "gaussian_window", "refine_lk", "sample_windows"]
+__all__ = [
+    "Refinement",
+    "bspline_coefficients",
+    "cubic_bspline_weights",
+    "gaussian_window",
+    "refine_lk",
+    "sample_windows",
+]
 
 _TAPS, _PREFILTER = TAPS, PREFILTER  # the spline prefilter (features/spline_gradients.py)
 PREFILTER_MARGIN = _TAPS + 2
@@ -73,8 +80,9 @@ def bspline_coefficients(image: F32) -> F32:
     return np.asarray(out, dtype=np.float32)
 
 
-def _weights(f: F32) -> F32:
-    """Cubic B-spline weights of the taps at offsets −1, 0, 1, 2 from floor(x); f = x − floor(x)."""
+def cubic_bspline_weights(f: NDArray[Any]) -> NDArray[Any]:
+    """Cubic B-spline weights (..., 4) of the taps at offsets −1, 0, 1, 2 from floor(x);
+    f = x − floor(x), float32 or float64 (the weights keep its precision)."""
     f2 = f * f
     f3 = f2 * f
     g = 1 - f
@@ -103,7 +111,7 @@ def sample_windows(
     d, e = theta[:, 0], theta[:, 1]
     yc = y0 - e
     iy = np.floor(yc).astype(np.int64)
-    wy = _weights((yc - iy).astype(np.float32))
+    wy = cubic_bspline_weights((yc - iy).astype(np.float32))
     idx = np.arange(m)
     band_y = np.zeros((n, m, m + 3), np.float32)
     for k in range(4):
@@ -111,7 +119,7 @@ def sample_windows(
     if not slant:
         xc = x0 - d
         ix = np.floor(xc).astype(np.int64)
-        wx = _weights((xc - ix).astype(np.float32))
+        wx = cubic_bspline_weights((xc - ix).astype(np.float32))
         blk, ok = _block(coef, iy - r - 1, ix - r - 1, m + 3, m + 3)
         band_x = np.zeros((n, m + 3, m), np.float32)
         for k in range(4):
@@ -122,7 +130,7 @@ def sample_windows(
     xs = (x0 - d)[:, None, None] + u[None, None, :] * (1 - sx)[:, None, None]
     xs = (xs - sy[:, None, None] * u[None, :, None]).astype(np.float32)
     fl = np.floor(xs)
-    wx = _weights(xs - fl).reshape(-1, 4)
+    wx = cubic_bspline_weights(xs - fl).reshape(-1, 4)
     ix = fl.astype(np.int64)
     c0 = ix.reshape(n, -1).min(axis=1) - 1
     width = int((ix.reshape(n, -1).max(axis=1) - c0).max()) + 3
