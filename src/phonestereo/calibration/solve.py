@@ -47,13 +47,14 @@ class CalibrationOptions:
     reject_outliers: bool = True
     #: Cap on rejection rounds.
     max_rounds: int = 10
-    #: Weight each view by its own residual σ (variance components,
-    #: :mod:`~phonestereo.calibration.view_weights`). On the presets' phone-ISP renders the wide's
-    #: far boards err 3× more than its near ones; the pooled solve rejected their corners as
-    #: outliers (28–73 a seed) and read d²/P 1.31 over six seeds, per view 1.00. Off by default:
-    #: on linear renders (the 20-seed covariance test) RMS z went 1.040 → 1.103 and d²/P
-    #: 1.091 → 1.079 (session 28). Off: every corner alike (OpenCV's and mrcal's criterion).
-    view_weights: bool = False
+    #: Give a view its own residual σ where it differs from the pooled one beyond chance
+    #: (variance components, :mod:`~phonestereo.calibration.view_weights`). On the presets'
+    #: phone-ISP renders the wide's far boards err 3× more than its near ones; the pooled solve
+    #: rejected their corners as outliers (28–73 a seed) and read d²/P 1.31 over six seeds, with
+    #: the test 1.01. On linear renders, where views differ little, the 20-seed covariance test
+    #: reads d²/P 1.084, RMS z 1.060 (pooled 1.091 / 1.040). On by default because real
+    #: calibrations are phone JPEGs; off: every corner alike (OpenCV's and mrcal's criterion).
+    view_weights: bool = True
 
 
 def _initial_camera(
