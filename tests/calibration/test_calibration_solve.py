@@ -245,8 +245,14 @@ def test_views_weighted_by_their_own_residuals_keep_noisy_views_and_honest_covar
             err = res.parameters - truth
             d2[key].append(float(err @ np.linalg.solve(res.covariance, err)) / err.size)
             rejected[key] += res.n_outliers
+            own = res.view_sigma_ratios()
+            if key == "pooled":
+                assert own == {}
+            else:  # exactly the noisy views, both cameras, at ~4× the pooled σ
+                assert {v for _, v in own} == {i for i in range(len(poses)) if i % 3 == 0}
+                assert all(3.0 < r < 5.0 for r in own.values()), own
     # measured: pooled d²/P 4.5-5.9 with 1594 corners rejected (whole noisy views); per view
-    # 0.87-1.08 (mean 1.01) with 36 rejected (χ² at 99.7 %: ~0.3 % of ~10000 corners); 4 seeds
+    # 0.85-1.08 (mean 1.00) with 31 rejected (χ² at 99.7 %: ~0.3 % of ~10000 corners); 4 seeds
     # × ~130 parameters give the mean d²/P to ±0.06
     assert 0.85 < np.mean(d2["per view"]) < 1.15, d2
     assert rejected["per view"] < 60 and rejected["pooled"] > 10 * rejected["per view"], rejected

@@ -47,11 +47,26 @@ class CalibrationResult:
     rounds: int
     #: Wall time of the solve, initialisation included.
     seconds: float
+    #: ndarray, shape (M,), or None. Each corner's weight σ_ref / σ_view: 1 where its view kept
+    #: the pooled σ, None when every corner counted alike (:mod:`.view_weights`).
+    weights: np.ndarray | None = None
 
     @property
     def n_outliers(self) -> int:
         """Number of rejected points."""
         return int(np.count_nonzero(~self.inliers))
+
+    def view_sigma_ratios(self) -> dict[tuple[int, int], float]:
+        """σ_view / σ_ref of each (camera, view) that got its own residual σ (:mod:`.view_weights`).
+
+        Views that kept the pooled σ are left out; empty when every corner counted alike. The
+        view index is the pair's (stereo) or the found view's (mono) position.
+        """
+        if self.weights is None:
+            return {}
+        own = np.flatnonzero(np.abs(self.weights - 1.0) > 1e-9)
+        keys = zip(self.camera_index[own].tolist(), self.view_index[own].tolist(), strict=True)
+        return {(c, v): float(1.0 / self.weights[i]) for (c, v), i in zip(keys, own, strict=True)}
 
     @property
     def std(self) -> dict[str, float]:

@@ -51,8 +51,8 @@ class CalibrationOptions:
     #: (variance components, :mod:`~phonestereo.calibration.view_weights`). On the presets'
     #: phone-ISP renders the wide's far boards err 3× more than its near ones; the pooled solve
     #: rejected their corners as outliers (28–73 a seed) and read d²/P 1.31 over six seeds, with
-    #: the test 1.01. On linear renders, where views differ little, the 20-seed covariance test
-    #: reads d²/P 1.084, RMS z 1.060 (pooled 1.091 / 1.040). On by default because real
+    #: the test 1.00. On linear renders, where views differ little, the 20-seed covariance test
+    #: reads d²/P 1.086, RMS z 1.063 (pooled 1.091 / 1.040). On by default because real
     #: calibrations are phone JPEGs; off: every corner alike (OpenCV's and mrcal's criterion).
     view_weights: bool = True
 
@@ -234,6 +234,7 @@ def _finish(
         rms_px_per_coordinate=float(np.sqrt(np.mean(ri**2))),
         rounds=rounds,
         seconds=time.perf_counter() - t0,
+        weights=None if weights is None else np.asarray(weights, np.float64),
     )
 
 

@@ -12,6 +12,7 @@ from rich.console import Console
 from rich.progress import Progress
 
 from phonestereo.calibration.from_images import ImageReport, calibrate_from_images, parse_board
+from phonestereo.calibration.result import CalibrationResult
 from phonestereo.calibration.solve import CalibrationOptions, intrinsic_extrinsic_covariance
 from phonestereo.cli.app import app
 from phonestereo.cli.outputs import require_output_file, require_output_folder
@@ -77,9 +78,9 @@ def calibrate(
     or the saddle fit's own misfit on processed images (JPEGs), predicts per corner coordinate:
     an RMS per coordinate far above it points at the lens model, the board or the images (blur,
     rolling shutter). A view whose residual σ differs from the others' beyond chance is
-    weighted by its own (on phone-ISP renders the pooled solve rejected the far views' corners
-    as outliers and read d²/P 1.31, with the weights 1.01); ``--no-view-weights`` weighs every
-    corner alike, as OpenCV does.
+    weighted by its own, and named in the table (on phone-ISP renders the pooled solve rejected
+    the far views' corners as outliers and read d²/P 1.31, with the weights 1.00);
+    ``--no-view-weights`` weighs every corner alike, as OpenCV does.
     """
     console = Console(stderr=True)
     if model not in FIT_MODELS:
@@ -134,6 +135,7 @@ def calibrate(
             console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
             raise typer.Exit(2) from exc
     corner_sigma = _corner_sigma(reports)
+    own_sigma = _views_with_own_sigma(result, reports)
     summary = {
         "rms_px_per_point": result.rms_px_per_point,
         "rms_px_per_coordinate": result.rms_px_per_coordinate,
@@ -146,6 +148,7 @@ def calibrate(
         "T_tele_wide": result.T_tele_wide.to_dict() if result.T_tele_wide else None,
         "std": {n: result.std[n] for n in names},
         "corner_sigma_px": corner_sigma,
+        "views_own_sigma": own_sigma,
         "baseline": None
         if result.T_tele_wide is None
         else dict(zip(("norm", "std"), result.baseline(), strict=True)),
@@ -162,6 +165,11 @@ def calibrate(
     table.add_row("outliers", f"{result.n_outliers} of {result.inliers.size}")
     sig = ", ".join(f"{k} {v:.4f}" for k, v in corner_sigma.items())
     table.add_row("corner σ (noise or misfit)", f"{sig} px (median)")
+    if own_sigma:
+        worst = sorted(own_sigma, key=lambda v: -abs(np.log(v["sigma_ratio"])))[:4]
+        listed = ", ".join(f"{Path(v['image']).name} ×{v['sigma_ratio']:.1f}" for v in worst)
+        more = f", +{len(own_sigma) - len(worst)} more" if len(own_sigma) > len(worst) else ""
+        table.add_row("views with their own σ", f"{len(own_sigma)}: {listed}{more}")
     for c, cam in enumerate(result.cameras):
         who = ("wide", "tele")[c] if len(result.cameras) == 2 else "camera"
         sd = result.std
@@ -179,6 +187,21 @@ def calibrate(
     for r in reports:
         if not r.found:
             console.print(f"[yellow]skipped[/yellow] {r.path}: {r.reason}")
+
+
+def _views_with_own_sigma(result: CalibrationResult, reports: list[ImageReport]) -> list[dict]:
+    """The views whose residual σ differs from the others' beyond chance: image, camera, and
+    σ_view / σ_pooled (stereo views are pairs in sorted-name order, mono ones the found images)."""
+    stereo = result.T_tele_wide is not None
+    by_camera = {
+        cam: [r for r in reports if r.camera == cam and (stereo or r.found)]
+        for cam in ("wide", "tele")
+    }
+    out = []
+    for (c, v), ratio in sorted(result.view_sigma_ratios().items()):
+        cam = ("wide", "tele")[c] if stereo else "wide"
+        out.append({"image": by_camera[cam][v].path, "camera": cam, "sigma_ratio": ratio})
+    return out
 
 
 def _corner_sigma(reports: list[ImageReport]) -> dict[str, float]:
