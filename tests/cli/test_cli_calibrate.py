@@ -82,6 +82,20 @@ def test_view_weights_keep_the_noisier_views(tmp_path: Path) -> None:
         assert abs(abs(s["T_tele_wide"]["t"][0]) - 3.33) < 0.05  # square units
 
 
+def test_mono_calibration_names_its_noisier_view(tmp_path: Path) -> None:
+    code, out = _run(
+        "calibrate", "--board", "9x6", "--square-m", "1", "--wide", str(DATA / "left*.jpg"),
+        "--out", str(tmp_path / "c.json"), "--json",
+    )
+    assert code == 0, out
+    summary = json.loads(out.strip().splitlines()[-1])
+    # measured: the 13 left images alone give left08.jpg its own σ, 1.4× the pooled one (the
+    # view index of a mono solve counts the images with a board, named as the table names it)
+    own = summary["views_own_sigma"]
+    assert [(Path(v["image"]).name, v["camera"]) for v in own] == [("left08.jpg", "camera")]
+    assert 1.2 < own[0]["sigma_ratio"] < 3.0
+
+
 def test_wrong_board_size_names_the_fix(tmp_path: Path) -> None:
     code, out = _run(
         "calibrate",

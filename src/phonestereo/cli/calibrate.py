@@ -200,7 +200,8 @@ def _views_with_own_sigma(result: CalibrationResult, reports: list[ImageReport])
     out = []
     for (c, v), ratio in sorted(result.view_sigma_ratios().items()):
         cam = ("wide", "tele")[c] if stereo else "wide"
-        out.append({"image": by_camera[cam][v].path, "camera": cam, "sigma_ratio": ratio})
+        label = cam if stereo else "camera"  # mono: named as in the rest of the table
+        out.append({"image": by_camera[cam][v].path, "camera": label, "sigma_ratio": ratio})
     return out
 
 
