@@ -20,7 +20,8 @@ def _obs(sigmas: list[float], n: int, rng: np.random.Generator) -> tuple[np.ndar
 def test_views_alike_but_for_chance_keep_the_pooled_sigma() -> None:
     # 40 views of 54 corners with one σ: each view's own σ estimate errs by ~7 % (ν = 102),
     # which weights of their own would pass to the covariance. The gate at 99.7 % leaves
-    # ~0.3 % of views reweighted by chance: over 40 views × 10 draws, ≤ 5 of 400 (mean 1.2).
+    # ~0.3 % of views reweighted by chance: over 40 views × 10 draws, ≤ 5 of 400 (expected 1.2,
+    # measured 1).
     rng = np.random.default_rng(7)
     reweighted = 0
     for _ in range(10):
