@@ -83,6 +83,9 @@ def _calibrate(folder: Path, work: Path, params: dict[str, Any]) -> dict[str, An
     )
     return {
         "rms_px_per_point": result.rms_px_per_point,
+        "outliers": result.n_outliers,
+        # views whose residual σ differs from the others' beyond chance (weighted by their own)
+        "views_own_sigma": len(result.view_sigma_ratios()),
         "views_wide": found["wide"],
         "views_tele": found["tele"],
         "wide_f_px": rig.wide.f,
