@@ -71,21 +71,26 @@ def view_weights(
     ok = np.isfinite(sig) & (sig > 0)
     if not ok.any():
         return np.ones(key.size)
-    dof = np.where(ok, 2 * n - 6, 0.0)
-    lo = stats.chi2.ppf(significance / 2, np.maximum(dof, 1)) / np.maximum(dof, 1)
-    hi = stats.chi2.isf(significance / 2, np.maximum(dof, 1)) / np.maximum(dof, 1)
+    nu = np.maximum(2 * n - 6, 1.0)
+    lo = stats.chi2.ppf(significance / 2, nu) / nu
+    hi = stats.chi2.isf(significance / 2, nu) / nu
+
+    def alike_to(ref: float) -> np.ndarray:
+        ratio = (sig / ref) ** 2
+        return np.asarray(ok & (ratio >= lo) & (ratio <= hi))
+
     # σ_ref: the median, then the pooled σ of the views alike to it (the median alone sits
     # high when a third of the views are noisy, and flags quiet views by their chance lows)
     ref = float(np.median(sig[ok]))
     for _ in range(3):
-        alike = ok & ((sig / ref) ** 2 >= lo) & ((sig / ref) ** 2 <= hi)
+        alike = alike_to(ref)
         if not alike.any():
             break
-        pooled = float(np.sqrt(np.sum(ss[alike]) / np.sum(dof[alike])))
+        pooled = float(np.sqrt(np.sum(ss[alike]) / np.sum(nu[alike])))
         if abs(pooled - ref) <= 1e-6 * ref:
             break
         ref = pooled
-    alike = ok & ((sig / ref) ** 2 >= lo) & ((sig / ref) ** 2 <= hi)
+    alike = alike_to(ref)
     sig = np.where(ok & ~alike, np.maximum(sig, ref / 4), ref)
     return np.asarray(ref / sig[group])
 
