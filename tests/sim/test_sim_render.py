@@ -496,6 +496,25 @@ def test_defocus_is_per_object_depth_and_layers_compose() -> None:
     assert rv.object_index[29, 60] == 1 and rv.depth_m[29, 60] == pytest.approx(1.0, rel=1e-6)
 
 
+def test_defocus_layer_of_textured_cells_adds_up_to_the_sharp_render() -> None:
+    """The defocus layer holds each refined pixel's area pieces: textured cells whose 8 × 8
+    samples all see the chart as one piece (their mean), cells whose samples see the chart and
+    the background sample by sample. With σ = 0 the composite is the sharp render again, pixel
+    by pixel, so the pieces of both kinds add up to the pixel's area mean and its coverage
+    (one object over the background: compositing is exact there, unlike at an occlusion)."""
+    cam = Camera((80, 60), 100.0, 100.0, 39.5, 29.5)
+    # a 2.3 px period: aliased texture, resolved on the 8 × 8 grid, also where its border
+    # crosses a pixel (texture and background in one cell)
+    near = PlanarObject(Waves(0.023, (0.35, 0.25)), facing_pose((0.35, 0.25), 1.0), "near")
+    scene = Scene((near,), background=0.05)
+    sharp = render_view(cam, Transform.identity(), scene).radiance.astype(float)
+    layered = render_view(cam, Transform.identity(), scene, defocus_sigma_px=lambda z: 0.0)
+    assert np.abs(layered.radiance - sharp).max() < 1e-6  # float32 rounding of the layer
+    assert np.ptp(sharp[20:40, 30:50]) > 0.3  # the texture is there
+    edge = sharp[29, 20:24]  # the chart's left border (x = 22.0) between two pixel centres
+    assert edge[0] == pytest.approx(0.05) and 0.05 < edge[2] < 0.8
+
+
 def test_point_sampling_mode_empty_scene_and_chart_out_of_view() -> None:
     cam = Camera((5, 3), 10.0, 10.0, 2.0, 1.0)
 

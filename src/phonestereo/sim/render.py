@@ -223,7 +223,11 @@ def _area(
         elif len(rest):
             sv, si = _cast(ctx, b.take(rest), ctx.flat if flat else ctx.grid)
             val[rest], n = sv.mean(axis=1), sv.shape[1]
-            parts.append((np.repeat(rest, n), si.ravel(), np.full(sv.size, 1.0 / n), sv.ravel()))
+            one = np.all(si == si[:, :1], axis=1)  # one object seen: one piece (memory: 1/64)
+            mix = rest[~one]
+            parts += [(rest[one], si[one, 0], np.ones(int(one.sum())), val[rest[one]]),
+                      (np.repeat(mix, n), si[~one].ravel(), np.full(mix.size * n, 1.0 / n),
+                       sv[~one].ravel())]
     return val, parts
 
 
@@ -364,14 +368,8 @@ def render_view(
 
 
 def _defocus(
-    value: F64,
-    index: I16,
-    depth: F64,
-    planes: list[ViewPlane],
-    crossed: tuple[Idx, Idx],
-    parts: list[_Part],
-    sigma_of_depth: Callable[[float], float],
-    bg: float,
+    value: F64, index: I16, depth: F64, planes: list[ViewPlane], crossed: tuple[Idx, Idx],
+    parts: list[_Part], sigma_of_depth: Callable[[float], float], bg: float,
 ) -> NDArray[np.float32]:
     """Each object's visible layer (coverage, premultiplied radiance) and its σ → composite."""
     ys, xs = crossed
