@@ -511,7 +511,7 @@ def test_defocus_layer_of_textured_cells_adds_up_to_the_sharp_render() -> None:
     layered = render_view(cam, Transform.identity(), scene, defocus_sigma_px=lambda z: 0.0)
     assert np.abs(layered.radiance - sharp).max() < 1e-6  # float32 rounding of the layer
     assert np.ptp(sharp[20:40, 30:50]) > 0.3  # the texture is there
-    edge = sharp[29, 20:24]  # the chart's left border (x = 22.0) between two pixel centres
+    edge = sharp[29, 20:24]  # the chart's left border x = 22.0 halves pixel 22
     assert edge[0] == pytest.approx(0.05) and 0.05 < edge[2] < 0.8
 
 

@@ -223,7 +223,7 @@ def _area(
         elif len(rest):
             sv, si = _cast(ctx, b.take(rest), ctx.flat if flat else ctx.grid)
             val[rest], n = sv.mean(axis=1), sv.shape[1]
-            one = np.all(si == si[:, :1], axis=1)  # one object seen: one piece (memory: 1/64)
+            one = np.all(si == si[:, :1], axis=1)  # one object: one piece, not n (GBs per view)
             mix = rest[~one]
             parts += [(rest[one], si[one, 0], np.ones(int(one.sum())), val[rest[one]]),
                       (np.repeat(mix, n), si[~one].ravel(), np.full(mix.size * n, 1.0 / n),
