@@ -233,16 +233,17 @@ class FaceChart:
         inside = inside_mask(u, v, self.size_m)
         out[~inside] = np.nan
         idx = np.flatnonzero(inside)
-        cu, cv = u[idx], v[idx]
+        cu, cv = u.take(idx), v.take(idx)  # 1-D takes: faster than fancy indexing, same values
         col = np.minimum((cu * (1.0 / self.cell_m)).astype(np.intp), cols - 1)
         row = np.minimum((cv * (1.0 / self.cell_m)).astype(np.intp), rows - 1)
         face = row * cols + col
-        b = self._boxes
-        hit = (cu >= b[face, 0]) & (cu < b[face, 2]) & (cv >= b[face, 1]) & (cv < b[face, 3])
+        b, o = self._boxes.T, self._origin.T
+        hit = (cu >= b[0].take(face)) & (cu < b[2].take(face))
+        hit &= (cv >= b[1].take(face)) & (cv < b[3].take(face))
         idx, face = idx[hit], face[hit]
-        inv = 1.0 / self._scale[face]
-        x = (u[idx] - self._origin[face, 0]) * inv
-        y = (v[idx] - self._origin[face, 1]) * inv
+        inv = 1.0 / self._scale.take(face)
+        x = (u.take(idx) - o[0].take(face)) * inv
+        y = (v.take(idx) - o[1].take(face)) * inv
         out[idx] = _bilinear(_raster_stack(self.faces), face, x, y)
         return out
 
@@ -274,6 +275,7 @@ def _bilinear(stack: Array, k: Any, x: Array, y: Array) -> Array:
     fy = yc - y0
     flat = stack.ravel()
     i = (np.asarray(k, dtype=np.intp) * h + y0) * w + x0
-    top = flat[i] + (flat[i + 1] - flat[i]) * fx
-    bottom = flat[i + w] + (flat[i + w + 1] - flat[i + w]) * fx
+    p00, p01, p10, p11 = (flat.take(i + di) for di in (0, 1, w, w + 1))
+    top = p00 + (p01 - p00) * fx
+    bottom = p10 + (p11 - p10) * fx
     return top + (bottom - top) * fy
