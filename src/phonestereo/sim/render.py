@@ -222,10 +222,11 @@ def _area(
             parts += [(rest[k], i, w, v) for k, i, w, v in sub]
         elif len(rest):
             sv, si = _cast(ctx, b.take(rest), ctx.flat if flat else ctx.grid)
-            val[rest], n = sv.mean(axis=1), sv.shape[1]
+            mean, n = sv.mean(axis=1), sv.shape[1]
+            val[rest] = mean
             one = np.all(si == si[:, :1], axis=1)  # one object: one piece, not n (GBs per view)
             mix = rest[~one]
-            parts += [(rest[one], si[one, 0], np.ones(int(one.sum())), val[rest[one]]),
+            parts += [(rest[one], si[one, 0], np.ones(int(one.sum())), mean[one]),
                       (np.repeat(mix, n), si[~one].ravel(), np.full(mix.size * n, 1.0 / n),
                        sv[~one].ravel())]
     return val, parts
